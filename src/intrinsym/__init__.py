@@ -1,0 +1,1 @@
+"""intrinsym: partial intrinsic symmetries with an MRF and loopy belief propagation."""
