@@ -1,0 +1,833 @@
+"""Approximate geodesic distances on meshes and point clouds by shortest paths in a graph.
+
+The graph (:func:`surface_graph`) has straight-line (Euclidean) edge lengths; graph
+shortest paths approximate geodesics. On mesh edges alone Dijkstra overestimates
+geodesics by several percent ("metrication"), so the graph adds shortcut chords (see
+:func:`surface_graph` for the construction and its measured error).
+
+Every function takes the graph as a symmetric ``scipy.sparse`` matrix of shape (N, N)
+whose entries are edge lengths; vertex indices refer to its rows. Distances are in the
+units of the vertex coordinates.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+__all__ = [
+    "SparseDistances",
+    "distances_from",
+    "local_distances",
+    "mesh_edges",
+    "pair_distances",
+    "surface_graph",
+    "voronoi_adjacency",
+]
+
+
+@dataclass(frozen=True)
+class SparseDistances:
+    """Row-sorted sparse geodesic distances between the points of a set, up to a radius.
+
+    Row i lists every j with d(i,j) <= radius, INCLUDING i itself at distance 0, sorted by
+    ascending distance.
+
+    Attributes
+    ----------
+    indptr : (n+1,) int64
+        Row ``i`` occupies ``indices[indptr[i]:indptr[i+1]]``.
+    indices : (nnz,) int64
+        Indices into the point set (not mesh vertices).
+    dist : (nnz,) float64
+        Distances, ascending within each row; ``d(i, j) == d(j, i)``.
+    radius : float
+        The cut-off radius (length units).
+    """
+
+    indptr: np.ndarray
+    indices: np.ndarray
+    dist: np.ndarray
+    radius: float
+
+    @property
+    def n(self) -> int:
+        """Number of points (rows)."""
+        return len(self.indptr) - 1
+
+    def row(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Point indices (k,) and distances (k,) of row ``i``, ascending by distance."""
+        lo, hi = self.indptr[i], self.indptr[i + 1]
+        return self.indices[lo:hi], self.dist[lo:hi]
+
+
+# --------------------------------------------------------------------------- graph
+
+
+def mesh_edges(faces: np.ndarray) -> np.ndarray:
+    """Unique undirected edges of a triangle mesh.
+
+    Parameters
+    ----------
+    faces : (F, 3) int array
+
+    Returns
+    -------
+    (M, 2) int64
+        Vertex pairs with ``u < v``, sorted lexicographically.
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    return _unique_pairs(e)
+
+
+def _unique_pairs(pairs: np.ndarray) -> np.ndarray:
+    """Sort each pair, drop self-pairs and duplicates; (K, 2) int64 rows, lexicographic."""
+    p = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+    p = p[p[:, 0] != p[:, 1]]
+    if len(p) == 0:
+        return p
+    base = p[:, 1].max() + 1
+    key = np.sort(p[:, 0] * base + p[:, 1])
+    key = key[np.r_[True, key[1:] != key[:-1]]]
+    return np.stack([key // base, key % base], axis=1)
+
+
+def _opposite_pairs(faces: np.ndarray) -> np.ndarray:
+    """For every edge shared by two triangles, the two vertices opposite to it.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+
+    Returns
+    -------
+    (K, 2) int64
+        One pair per interior edge. A non-manifold edge with k > 2 triangles yields the
+        k - 1 pairs of triangles adjacent in sorted order.
+    """
+    he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    opp = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
+    he.sort(axis=1)
+    key = he[:, 0] * (he[:, 1].max() + 1) + he[:, 1]
+    order = np.argsort(key, kind="stable")
+    key, opp = key[order], opp[order]
+    same = key[1:] == key[:-1]
+    return np.stack([opp[:-1][same], opp[1:][same]], axis=1)
+
+
+def _symmetric_csr(n: int, pairs: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
+    """(n, n) symmetric CSR with ``weights`` on unique pairs (u < v) and their mirrors."""
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    g = sp.csr_matrix((np.concatenate([weights, weights]), (rows, cols)), shape=(n, n))
+    g.sort_indices()
+    return g
+
+
+@nb.njit(cache=True, nogil=True)
+def _ring_pairs(adj_ptr: np.ndarray, adj_idx: np.ndarray, rings: int) -> np.ndarray:
+    """All vertex pairs (u, w), u < w, at most ``rings`` edge hops apart.
+
+    Parameters
+    ----------
+    adj_ptr, adj_idx : CSR adjacency of the mesh edges, (N+1,), (2M,) int64
+    rings : int
+
+    Returns
+    -------
+    (K, 2) int64
+    """
+    n = len(adj_ptr) - 1
+    depth = np.full(n, -1, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    out = np.empty((max(16, 16 * n), 2), dtype=np.int64)
+    k = 0
+    for u in range(n):
+        depth[u] = 0
+        queue[0] = u
+        head = 0
+        tail = 1
+        while head < tail:
+            v = queue[head]
+            head += 1
+            if depth[v] == rings:
+                continue
+            for e in range(adj_ptr[v], adj_ptr[v + 1]):
+                w = adj_idx[e]
+                if depth[w] < 0:
+                    depth[w] = depth[v] + 1
+                    queue[tail] = w
+                    tail += 1
+                    if w > u:
+                        if k == len(out):
+                            grown = np.empty((2 * len(out), 2), dtype=np.int64)
+                            grown[:k] = out[:k]
+                            out = grown
+                        out[k, 0] = u
+                        out[k, 1] = w
+                        k += 1
+        for t in range(tail):
+            depth[queue[t]] = -1
+    return out[:k]
+
+
+@nb.njit(cache=True, nogil=True)
+def _keep_chords(
+    vertices: np.ndarray,
+    ptr: np.ndarray,
+    idx: np.ndarray,
+    is_base: np.ndarray,
+    tol: float,
+) -> np.ndarray:
+    """Which candidate edges to keep: base edges, and chords no 2-path nearly matches.
+
+    A chord (u, w) is dropped when some common neighbour x has
+    ``|ux| + |xw| <= (1 + tol) |uw|``: x lies almost on the segment, so the chord would
+    shorten no path by more than ``tol``. The test is symmetric in u and w.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float64
+    ptr, idx : symmetric CSR pattern of all candidate edges, (N+1,), (E,) int64
+    is_base : (E,) bool
+        Entries that are kept unconditionally.
+    tol : float
+
+    Returns
+    -------
+    (E,) bool
+    """
+    n = len(ptr) - 1
+    len_u = np.full(n, np.inf)
+    keep = np.empty(len(idx), dtype=np.bool_)
+    for u in range(n):
+        for e in range(ptr[u], ptr[u + 1]):
+            w = idx[e]
+            len_u[w] = np.sqrt(
+                (vertices[u, 0] - vertices[w, 0]) ** 2
+                + (vertices[u, 1] - vertices[w, 1]) ** 2
+                + (vertices[u, 2] - vertices[w, 2]) ** 2
+            )
+        for e in range(ptr[u], ptr[u + 1]):
+            if is_base[e]:
+                keep[e] = True
+                continue
+            w = idx[e]
+            bound = (1.0 + tol) * len_u[w]
+            keep[e] = True
+            for f in range(ptr[w], ptr[w + 1]):
+                x = idx[f]
+                if x != u and len_u[x] < bound:
+                    via = len_u[x] + np.sqrt(
+                        (vertices[x, 0] - vertices[w, 0]) ** 2
+                        + (vertices[x, 1] - vertices[w, 1]) ** 2
+                        + (vertices[x, 2] - vertices[w, 2]) ** 2
+                    )
+                    if via <= bound:
+                        keep[e] = False
+                        break
+        for e in range(ptr[u], ptr[u + 1]):
+            len_u[idx[e]] = np.inf
+    return keep
+
+
+def surface_graph(
+    vertices: np.ndarray,
+    faces: np.ndarray | None,
+    k: int = 8,
+    *,
+    rings: int = 3,
+    tol: float = 0.01,
+) -> sp.csr_matrix:
+    """Graph whose shortest paths approximate geodesics on a surface.
+
+    Triangle mesh: all mesh edges; across each interior edge shared by triangles
+    (a, b, c) and (b, a, d), the shortcut chord c-d; and chords from every vertex to the
+    vertices within ``rings`` edge hops, except chords that pass within ``tol`` of
+    another vertex (some common neighbour x with ``|ux| + |xw| <= (1 + tol) |uw|``:
+    these cannot shorten a path by more than ``tol`` and only cost time). The extra
+    chords give Dijkstra more directions to move in, which is what cuts metrication
+    error. Point cloud (``faces`` None): the symmetric k-nearest-neighbour graph. All
+    edge weights are straight-line lengths.
+
+    Mean relative error against analytic geodesics (pairs 0.1-0.6 apart, 300 sources,
+    about 10k vertices, see tests/test_geodesics.py):
+
+    ========================  ============  =================  =========
+    graph                     icosphere r=1  grid cylinder r=1  grid plane
+    ========================  ============  =================  =========
+    mesh edges                +9%           over +10%          over +10%
+    + shortcut chords         +1.9%         +3.4%              +3.4%
+    + 3-ring chords (default) +0.5%         +0.9%              +0.9%
+    ========================  ============  =================  =========
+
+    The default has about 25 neighbours per vertex (12 with shortcuts only) and makes a
+    radius-limited Dijkstra about 1.3x slower. Chords are straight lines, so where the
+    surface bends strongly within 3 hops (a finger a few edges thick) they can cut
+    short a geodesic; ``rings=1`` keeps only mesh edges and shortcut chords.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+    faces : (F, 3) int array or None
+    k : int
+        Neighbours per point for a point cloud (ignored for a mesh).
+    rings : int
+        Hop radius of the extra chords on a mesh (1: mesh edges and shortcuts only).
+    tol : float
+        Relative tolerance of the chord pruning.
+
+    Returns
+    -------
+    (N, N) scipy.sparse.csr_matrix, float64
+        Symmetric, one entry per undirected edge and direction, lengths in the units
+        of ``vertices``; duplicate edges merged.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must be (N, 3), got shape {v.shape}")
+    n = len(v)
+    if faces is None:
+        if k < 1:
+            raise ValueError(f"k must be >= 1, got {k}")
+        kk = min(k + 1, n)
+        _, nbr = cKDTree(v).query(v, k=kk)
+        pairs = _unique_pairs(np.stack([np.repeat(np.arange(n), kk), nbr.reshape(n, kk).ravel()], axis=1))
+        return _symmetric_csr(n, pairs, np.linalg.norm(v[pairs[:, 0]] - v[pairs[:, 1]], axis=1))
+    f = np.asarray(faces, dtype=np.int64)
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"faces must be (F, 3), got shape {f.shape}")
+    if len(f) and (f.min() < 0 or f.max() >= n):
+        raise ValueError(f"faces index vertices outside 0..{n - 1}")
+    if rings < 1:
+        raise ValueError(f"rings must be >= 1, got {rings}")
+    edges = mesh_edges(f)
+    base = _unique_pairs(np.concatenate([edges, _opposite_pairs(f)]))
+    if len(base) == 0:
+        return sp.csr_matrix((n, n), dtype=np.float64)
+    adj = _symmetric_csr(n, edges, np.ones(len(edges)))
+    ring = _ring_pairs(adj.indptr.astype(np.int64), adj.indices.astype(np.int64), rings)
+    cand = _unique_pairs(np.concatenate([base, ring]))
+    # flag 2 marks base edges (always kept), 1 the optional chords; keys are sorted
+    base_key = base[:, 0] * n + base[:, 1]
+    cand_key = cand[:, 0] * n + cand[:, 1]
+    pos = np.minimum(np.searchsorted(base_key, cand_key), len(base_key) - 1)
+    flag = 1.0 + (base_key[pos] == cand_key)
+    pattern = _symmetric_csr(n, cand, flag)
+    ptr = pattern.indptr.astype(np.int64)
+    idx = pattern.indices.astype(np.int64)
+    keep = _keep_chords(v, ptr, idx, pattern.data == 2.0, float(tol))
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr))[keep]
+    cols = idx[keep]
+    g = sp.csr_matrix((np.linalg.norm(v[rows] - v[cols], axis=1), (rows, cols)), shape=(n, n))
+    g.sort_indices()
+    return g
+
+
+def _csr_arrays(graph: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(indptr, indices, weights) of a symmetric graph as int64/int64/float64 arrays."""
+    g = sp.csr_matrix(graph)
+    if g.shape[0] != g.shape[1]:
+        raise ValueError(f"graph must be square, got shape {g.shape}")
+    if g.nnz and abs(g - g.T).max() > 0:
+        raise ValueError("graph must be symmetric")
+    if g.nnz and g.data.min() < 0:
+        raise ValueError("graph has negative edge lengths")
+    return (
+        g.indptr.astype(np.int64),
+        g.indices.astype(np.int64),
+        g.data.astype(np.float64),
+    )
+
+
+# --------------------------------------------------------------------------- Dijkstra
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_push(hd: np.ndarray, hv: np.ndarray, size: int, d: float, v: int) -> None:
+    """Insert (d, v) into a binary min-heap stored in hd/hv[:size] (capacity checked by caller)."""
+    i = size
+    while i > 0:
+        parent = (i - 1) >> 1
+        if hd[parent] <= d:
+            break
+        hd[i] = hd[parent]
+        hv[i] = hv[parent]
+        i = parent
+    hd[i] = d
+    hv[i] = v
+
+
+@nb.njit(cache=True, nogil=True)
+def _heap_pop(hd: np.ndarray, hv: np.ndarray, size: int) -> tuple[float, int]:
+    """Remove and return the minimum of the heap hd/hv[:size] (size > 0)."""
+    d0 = hd[0]
+    v0 = hv[0]
+    size -= 1
+    d = hd[size]
+    v = hv[size]
+    i = 0
+    while True:
+        c = 2 * i + 1
+        if c >= size:
+            break
+        if c + 1 < size and hd[c + 1] < hd[c]:
+            c += 1
+        if hd[c] >= d:
+            break
+        hd[i] = hd[c]
+        hv[i] = hv[c]
+        i = c
+    hd[i] = d
+    hv[i] = v
+    return d0, v0
+
+
+@nb.njit(cache=True, nogil=True)
+def _grow_float(a: np.ndarray, used: int) -> np.ndarray:
+    b = np.empty(2 * len(a), dtype=a.dtype)
+    b[:used] = a[:used]
+    return b
+
+
+@nb.njit(cache=True, nogil=True)
+def _grow_int(a: np.ndarray, used: int) -> np.ndarray:
+    b = np.empty(2 * len(a), dtype=a.dtype)
+    b[:used] = a[:used]
+    return b
+
+
+@nb.njit(cache=True, nogil=True)
+def _ball_rows(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    weights: np.ndarray,
+    sources: np.ndarray,
+    label: np.ndarray,
+    limit: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Radius-limited Dijkstra from each source, recording labelled vertices.
+
+    Parameters
+    ----------
+    indptr, indices, weights : CSR arrays of the graph, (N+1,), (E,), (E,)
+    sources : (m,) int64 vertex indices
+    label : (N,) int64
+        Point index of each vertex, -1 for vertices that are not points.
+    limit : float
+        Search radius; vertices farther than ``limit`` are not reached.
+
+    Returns
+    -------
+    counts : (m,) int64
+        Number of points found from each source.
+    cols : (sum(counts),) int64
+        Point indices, grouped by source, ascending distance within a group.
+    dists : (sum(counts),) float64
+    """
+    n = len(indptr) - 1
+    dist = np.full(n, np.inf)
+    touched = np.empty(n, dtype=np.int64)
+    hd = np.empty(1024, dtype=np.float64)
+    hv = np.empty(1024, dtype=np.int64)
+    out_c = np.empty(1024, dtype=np.int64)
+    out_d = np.empty(1024, dtype=np.float64)
+    counts = np.zeros(len(sources), dtype=np.int64)
+    total = 0
+    for k in range(len(sources)):
+        s = sources[k]
+        dist[s] = 0.0
+        touched[0] = s
+        n_touched = 1
+        hd[0] = 0.0
+        hv[0] = s
+        size = 1
+        while size > 0:
+            d, u = _heap_pop(hd, hv, size)
+            size -= 1
+            if d > dist[u]:
+                continue
+            if label[u] >= 0:
+                if total == len(out_c):
+                    out_c = _grow_int(out_c, total)
+                    out_d = _grow_float(out_d, total)
+                out_c[total] = label[u]
+                out_d[total] = d
+                total += 1
+                counts[k] += 1
+            for e in range(indptr[u], indptr[u + 1]):
+                w = indices[e]
+                nd = d + weights[e]
+                if nd <= limit and nd < dist[w]:
+                    if dist[w] == np.inf:
+                        touched[n_touched] = w
+                        n_touched += 1
+                    dist[w] = nd
+                    if size == len(hd):
+                        hd = _grow_float(hd, size)
+                        hv = _grow_int(hv, size)
+                    _heap_push(hd, hv, size, nd, w)
+                    size += 1
+        for t in range(n_touched):
+            dist[touched[t]] = np.inf
+    return counts, out_c[:total], out_d[:total]
+
+
+@nb.njit(cache=True, nogil=True)
+def _symmetrize_rows(
+    indptr: np.ndarray, indices: np.ndarray, dist: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Symmetric union of a row-sorted sparse distance matrix, min of both directions.
+
+    Row i of the result holds every j listed in row i or with i listed in row j, at the
+    smaller of the two distances, sorted ascending (stable: the diagonal stays first).
+
+    Parameters
+    ----------
+    indptr : (n+1,) int64
+    indices : (nnz,) int64
+    dist : (nnz,) float64
+
+    Returns
+    -------
+    indptr, indices, dist of the symmetric matrix.
+    """
+    n = len(indptr) - 1
+    nnz = len(indices)
+    # transpose by counting sort: row j of the transpose lists i with j in row i
+    t_ptr = np.zeros(n + 1, dtype=np.int64)
+    for e in range(nnz):
+        t_ptr[indices[e] + 1] += 1
+    for j in range(n):
+        t_ptr[j + 1] += t_ptr[j]
+    fill = t_ptr[:-1].copy()
+    t_col = np.empty(nnz, dtype=np.int64)
+    t_dist = np.empty(nnz, dtype=np.float64)
+    for i in range(n):
+        for e in range(indptr[i], indptr[i + 1]):
+            j = indices[e]
+            t_col[fill[j]] = i
+            t_dist[fill[j]] = dist[e]
+            fill[j] += 1
+    # pass 1: row sizes of the union
+    pos = np.full(n, -1, dtype=np.int64)
+    out_ptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(n):
+        for e in range(indptr[i], indptr[i + 1]):
+            pos[indices[e]] = 0
+        extra = 0
+        for e in range(t_ptr[i], t_ptr[i + 1]):
+            if pos[t_col[e]] < 0:
+                extra += 1
+        for e in range(indptr[i], indptr[i + 1]):
+            pos[indices[e]] = -1
+        out_ptr[i + 1] = out_ptr[i] + indptr[i + 1] - indptr[i] + extra
+    # pass 2: fill, min of both directions, restore ascending order by insertion sort
+    out_col = np.empty(out_ptr[n], dtype=np.int64)
+    out_dist = np.empty(out_ptr[n], dtype=np.float64)
+    for i in range(n):
+        o = out_ptr[i]
+        m = 0
+        for e in range(indptr[i], indptr[i + 1]):
+            out_col[o + m] = indices[e]
+            out_dist[o + m] = dist[e]
+            pos[indices[e]] = o + m
+            m += 1
+        for e in range(t_ptr[i], t_ptr[i + 1]):
+            j = t_col[e]
+            if pos[j] >= 0:
+                if t_dist[e] < out_dist[pos[j]]:
+                    out_dist[pos[j]] = t_dist[e]
+            else:
+                out_col[o + m] = j
+                out_dist[o + m] = t_dist[e]
+                pos[j] = o + m
+                m += 1
+        for a in range(o, o + m):
+            pos[out_col[a]] = -1
+        for a in range(o + 1, o + m):
+            c = out_col[a]
+            d = out_dist[a]
+            b = a - 1
+            while b >= o and out_dist[b] > d:
+                out_col[b + 1] = out_col[b]
+                out_dist[b + 1] = out_dist[b]
+                b -= 1
+            out_col[b + 1] = c
+            out_dist[b + 1] = d
+    return out_ptr, out_col, out_dist
+
+
+@nb.njit(cache=True, nogil=True)
+def _pair_block(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    weights: np.ndarray,
+    group_source: np.ndarray,
+    group_ptr: np.ndarray,
+    targets: np.ndarray,
+    limit: float,
+) -> np.ndarray:
+    """Dijkstra from each group source until all of its targets are settled.
+
+    Parameters
+    ----------
+    indptr, indices, weights : CSR arrays of the graph
+    group_source : (g,) int64 source vertex of each group
+    group_ptr : (g+1,) int64
+        Group ``k`` owns ``targets[group_ptr[k]:group_ptr[k+1]]``.
+    targets : (P,) int64 target vertices
+    limit : float
+        Search radius.
+
+    Returns
+    -------
+    (P,) float64
+        Distance to each target, inf beyond ``limit`` or unreachable.
+    """
+    n = len(indptr) - 1
+    dist = np.full(n, np.inf)
+    done = np.zeros(n, dtype=np.bool_)
+    wanted = np.zeros(n, dtype=np.bool_)
+    touched = np.empty(n, dtype=np.int64)
+    hd = np.empty(1024, dtype=np.float64)
+    hv = np.empty(1024, dtype=np.int64)
+    out = np.full(len(targets), np.inf)
+    for k in range(len(group_source)):
+        lo, hi = group_ptr[k], group_ptr[k + 1]
+        remaining = 0
+        for p in range(lo, hi):
+            if not wanted[targets[p]]:
+                wanted[targets[p]] = True
+                remaining += 1
+        s = group_source[k]
+        dist[s] = 0.0
+        touched[0] = s
+        n_touched = 1
+        hd[0] = 0.0
+        hv[0] = s
+        size = 1
+        while size > 0 and remaining > 0:
+            d, u = _heap_pop(hd, hv, size)
+            size -= 1
+            if d > dist[u]:
+                continue
+            done[u] = True
+            if wanted[u]:
+                remaining -= 1
+            for e in range(indptr[u], indptr[u + 1]):
+                w = indices[e]
+                nd = d + weights[e]
+                if nd <= limit and nd < dist[w]:
+                    if dist[w] == np.inf:
+                        touched[n_touched] = w
+                        n_touched += 1
+                    dist[w] = nd
+                    if size == len(hd):
+                        hd = _grow_float(hd, size)
+                        hv = _grow_int(hv, size)
+                    _heap_push(hd, hv, size, nd, w)
+                    size += 1
+        for p in range(lo, hi):
+            t = targets[p]
+            if done[t]:
+                out[p] = dist[t]
+            wanted[t] = False
+        for t in range(n_touched):
+            dist[touched[t]] = np.inf
+            done[touched[t]] = False
+    return out
+
+
+def _n_workers() -> int:
+    return max(1, min(nb.get_num_threads(), os.cpu_count() or 1))
+
+
+def _split(n: int, n_parts: int) -> list[tuple[int, int]]:
+    """Contiguous [lo, hi) ranges covering range(n) in about n_parts pieces."""
+    bounds = np.linspace(0, n, max(1, min(n, n_parts)) + 1).astype(np.int64)
+    return [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+# --------------------------------------------------------------------------- public
+
+
+def distances_from(graph: sp.spmatrix, sources: np.ndarray, limit: float = np.inf, chunk: int = 256) -> np.ndarray:
+    """Graph-geodesic distances from a few sources to every vertex.
+
+    Parameters
+    ----------
+    graph : (N, N) sparse, symmetric
+        Edge lengths, e.g. from :func:`surface_graph`.
+    sources : (m,) int array
+        Source vertices.
+    limit : float
+        Distances beyond ``limit`` are not computed and come back as ``inf``.
+    chunk : int
+        Sources per Dijkstra call (bounds temporary memory to ``chunk x N``).
+
+    Returns
+    -------
+    (m, N) float64
+        Distances in length units; ``inf`` beyond ``limit`` or where unreachable.
+    """
+    g = sp.csr_matrix(graph)
+    src = np.asarray(sources, dtype=np.int64).ravel()
+    out = np.empty((len(src), g.shape[0]), dtype=np.float64)
+    for lo in range(0, len(src), max(1, chunk)):
+        part = src[lo : lo + chunk]
+        out[lo : lo + len(part)] = dijkstra(g, directed=True, indices=part, limit=limit)
+    return out
+
+
+def local_distances(graph: sp.spmatrix, points: np.ndarray, radius: float) -> SparseDistances:
+    """Sparse graph-geodesic distances among a point set, up to a radius.
+
+    One radius-limited Dijkstra per point (Numba, on as many threads as Numba uses),
+    then symmetrised: ``d(i, j) = min`` of the two directions, so that the result is
+    exactly symmetric. Memory is O(nnz + N) per thread, never ``n x N``.
+
+    Parameters
+    ----------
+    graph : (N, N) sparse, symmetric
+        Edge lengths, e.g. from :func:`surface_graph`.
+    points : (n,) int array
+        Distinct vertex indices: the point set.
+    radius : float
+        Cut-off (length units, >= 0).
+
+    Returns
+    -------
+    SparseDistances
+        ``n`` rows over point indices ``0..n-1``; row ``i`` starts with ``i`` at 0.
+    """
+    indptr, indices, weights = _csr_arrays(graph)
+    n_vert = len(indptr) - 1
+    pts = np.asarray(points, dtype=np.int64).ravel()
+    if not radius >= 0:
+        raise ValueError(f"radius must be >= 0, got {radius}")
+    if len(pts) and (pts.min() < 0 or pts.max() >= n_vert):
+        raise ValueError("points out of range of the graph's vertices")
+    label = np.full(n_vert, -1, dtype=np.int64)
+    label[pts] = np.arange(len(pts))
+    if len(np.unique(pts)) != len(pts):
+        raise ValueError("points must be distinct vertices")
+    ranges = _split(len(pts), 8 * _n_workers())
+    with ThreadPoolExecutor(_n_workers()) as pool:
+        parts = list(
+            pool.map(
+                lambda r: _ball_rows(indptr, indices, weights, pts[r[0] : r[1]], label, float(radius)),
+                ranges,
+            )
+        )
+    counts = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
+    row_ptr = np.zeros(len(pts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=row_ptr[1:])
+    cols = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
+    dists = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, np.float64)
+    row_ptr, cols, dists = _symmetrize_rows(row_ptr, cols, dists)
+    return SparseDistances(row_ptr, cols, dists, float(radius))
+
+
+def pair_distances(graph: sp.spmatrix, pairs: np.ndarray, limit: float = np.inf) -> np.ndarray:
+    """Graph-geodesic distance for each vertex pair.
+
+    One Dijkstra per distinct first vertex, stopped once all of its partners are
+    settled (or at ``limit``).
+
+    Parameters
+    ----------
+    graph : (N, N) sparse, symmetric
+    pairs : (E, 2) int array
+        Vertex index pairs.
+    limit : float
+        Search radius; farther pairs get ``inf``.
+
+    Returns
+    -------
+    (E,) float64
+        Distances in length units (``inf`` if beyond ``limit`` or unreachable).
+    """
+    indptr, indices, weights = _csr_arrays(graph)
+    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if len(p) and (p.min() < 0 or p.max() >= len(indptr) - 1):
+        raise ValueError("pairs out of range of the graph's vertices")
+    order = np.argsort(p[:, 0], kind="stable")
+    first = p[order, 0]
+    starts = np.flatnonzero(np.r_[True, first[1:] != first[:-1]]) if len(p) else np.zeros(0, np.int64)
+    group_ptr = np.r_[starts, len(p)].astype(np.int64)
+    group_source = first[starts]
+    targets = p[order, 1]
+    ranges = _split(len(group_source), 4 * _n_workers())
+    with ThreadPoolExecutor(_n_workers()) as pool:
+        parts = pool.map(
+            lambda r: _pair_block(
+                indptr,
+                indices,
+                weights,
+                group_source[r[0] : r[1]],
+                group_ptr[r[0] : r[1] + 1] - group_ptr[r[0]],
+                targets[group_ptr[r[0]] : group_ptr[r[1]]],
+                float(limit),
+            ),
+            ranges,
+        )
+        out_sorted = np.concatenate([np.zeros(0), *parts])
+    out = np.empty(len(p), dtype=np.float64)
+    out[order] = out_sorted
+    return out
+
+
+def voronoi_adjacency(
+    graph: sp.spmatrix, seeds: np.ndarray, edges: np.ndarray | None = None
+) -> np.ndarray:
+    """Seeds whose geodesic Voronoi regions touch (the paper's source neighbourhood).
+
+    Every vertex belongs to its nearest seed (multi-source Dijkstra on ``graph``); two
+    seeds are neighbours when some edge joins a vertex of one region to a vertex of the
+    other. Vertices not reachable from any seed are ignored.
+
+    Parameters
+    ----------
+    graph : (N, N) sparse, symmetric
+        Edge lengths used for the partition, e.g. from :func:`surface_graph`.
+    seeds : (s,) int array
+        Distinct seed vertices.
+    edges : (M, 2) int array, optional
+        Vertex pairs across which regions touch. Default: every edge of ``graph``. Pass
+        ``mesh_edges(faces)`` to count only contacts across mesh edges (the paper's
+        "regions meet" on the mesh; shortcut chords can also join regions that touch
+        only at a corner).
+
+    Returns
+    -------
+    (K, 2) int64
+        Unique pairs ``(i, j)``, ``i < j``, of indices into ``seeds``, sorted
+        lexicographically.
+    """
+    g = sp.csr_matrix(graph)
+    s = np.asarray(seeds, dtype=np.int64).ravel()
+    if len(np.unique(s)) != len(s):
+        raise ValueError("seeds must be distinct vertices")
+    if len(s) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    _, _, owner_vertex = dijkstra(g, directed=True, indices=s, min_only=True, return_predecessors=True)
+    seed_index = np.full(g.shape[0], -1, dtype=np.int64)
+    seed_index[s] = np.arange(len(s))
+    owner = np.where(owner_vertex >= 0, seed_index[np.maximum(owner_vertex, 0)], -1)
+    if edges is None:
+        coo = sp.triu(g, k=1).tocoo()
+        e = np.stack([coo.row, coo.col], axis=1).astype(np.int64)
+    else:
+        e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    a, b = owner[e[:, 0]], owner[e[:, 1]]
+    touching = (a >= 0) & (b >= 0) & (a != b)
+    return _unique_pairs(np.stack([a[touching], b[touching]], axis=1)).reshape(-1, 2)
