@@ -1,0 +1,162 @@
+"""Belief propagation: the sparse ring message against the dense paper-literal oracle,
+and BP on a tree against brute-force enumeration."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from intrinsym.bp import (
+    belief_propagation,
+    belief_propagation_dense,
+    incoming_edges,
+    serial_orders,
+)
+from intrinsym.geodesics import SparseDistances
+from intrinsym.model import MRF, lambda_for_tolerance, pairwise_dense
+
+
+def sparse_from_dense(dist: np.ndarray, radius: float) -> SparseDistances:
+    """Row-sorted sparse form of a dense distance matrix, entries <= radius."""
+    indptr = [0]
+    indices, values = [], []
+    for row in dist:
+        keep = np.flatnonzero(row <= radius)
+        keep = keep[np.argsort(row[keep], kind="stable")]
+        indices.append(keep)
+        values.append(row[keep])
+        indptr.append(indptr[-1] + len(keep))
+    return SparseDistances(
+        np.asarray(indptr, dtype=np.int64),
+        np.concatenate(indices).astype(np.int64),
+        np.concatenate(values).astype(np.float64),
+        float(radius),
+    )
+
+
+def sphere_problem(n_source: int, n_target: int, k: int, seed: int, tolerance: float = 1.5):
+    """Sources and targets on the unit sphere with exact great-circle distances."""
+    rng = np.random.default_rng(seed)
+
+    def points(n):
+        x = rng.normal(size=(n, 3))
+        return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+    src, tgt = points(n_source), points(n_target)
+    d_ss = np.arccos(np.clip(src @ src.T, -1, 1))
+    d_tt = np.arccos(np.clip(tgt @ tgt.T, -1, 1))
+    nearest = np.argsort(d_ss, axis=1)[:, 1 : k + 1]
+    edges = np.unique(np.sort(np.column_stack([np.repeat(np.arange(n_source), k), nearest.ravel()]), axis=1), axis=0)
+    length = d_ss[edges[:, 0], edges[:, 1]]
+    spacing = np.sqrt(4 * np.pi / n_target)
+    rho = 0.4
+    delta = tolerance * spacing
+    lam = lambda_for_tolerance(delta, rho)
+    unary = rng.uniform(0.01, 1.0, size=(n_source, n_target))
+    targets = sparse_from_dense(d_tt, length.max() + delta)
+    return MRF(unary, edges, length, targets, lam, rho), d_tt
+
+
+@pytest.mark.parametrize("schedule", ["serial", "flooding"])
+@pytest.mark.parametrize(
+    "n_source,n_target,k,iters", [(40, 300, 4, 6), (12, 2000, 3, 2)]
+)
+def test_sparse_equals_dense_oracle(schedule, n_source, n_target, k, iters):
+    mrf, d_tt = sphere_problem(n_source, n_target, k, seed=n_target)
+    kw = dict(schedule=schedule, iterations=iters, tol=0.0, seed=3)
+    sparse = belief_propagation(mrf, dtype=np.float64, **kw)
+    dense = belief_propagation_dense(
+        mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, **kw
+    )
+    assert sparse.iterations == dense.iterations == iters
+    assert np.abs(sparse.marginals - dense.marginals).max() < 1e-6
+    assert np.allclose(sparse.history, dense.history, atol=1e-6)
+    # and the marginals are informative, not uniform
+    assert np.abs(sparse.marginals - 1.0 / n_target).max() > 1e-4
+
+
+def test_damped_flooding_matches_oracle():
+    mrf, d_tt = sphere_problem(20, 400, 3, seed=1)
+    kw = dict(schedule="flooding", iterations=4, tol=0.0, damping=0.5, seed=0)
+    sparse = belief_propagation(mrf, dtype=np.float64, **kw)
+    dense = belief_propagation_dense(mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, **kw)
+    assert np.abs(sparse.marginals - dense.marginals).max() < 1e-6
+
+
+def test_float32_close_to_float64():
+    mrf, _ = sphere_problem(30, 500, 4, seed=2)
+    a = belief_propagation(mrf, iterations=5, tol=0.0, dtype=np.float64)
+    b = belief_propagation(mrf, iterations=5, tol=0.0, dtype=np.float32)
+    assert b.marginals.dtype == np.float32
+    assert np.abs(a.marginals - b.marginals).max() < 1e-5
+    assert np.allclose(b.marginals.sum(axis=1), 1.0, atol=1e-5)
+
+
+def test_too_short_target_radius_is_refused():
+    mrf, d_tt = sphere_problem(10, 100, 3, seed=4)
+    short = sparse_from_dense(d_tt, mrf.edge_length.max())
+    bad = MRF(mrf.unary, mrf.edges, mrf.edge_length, short, mrf.lam, mrf.rho)
+    with pytest.raises(ValueError, match="exact message needs"):
+        belief_propagation(bad)
+
+
+def test_tree_marginals_equal_brute_force():
+    """On a tree, converged sum-product BP gives the exact marginals."""
+    rng = np.random.default_rng(7)
+    n_label = 5
+    pos = rng.uniform(0, 1, size=(n_label, 2))
+    d_tt = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+    edges = np.array([[0, 1], [1, 2], [1, 3], [3, 4]])  # a tree on 5 nodes
+    length = np.array([0.3, 0.5, 0.2, 0.4])
+    rho, lam = 0.3, 8.0
+    unary = rng.uniform(0.05, 1.0, size=(5, n_label))
+    targets = sparse_from_dense(d_tt, np.inf)
+    mrf = MRF(unary, edges, length, targets, lam, rho)
+
+    joint = np.zeros((n_label,) * 5)
+    for labels in itertools.product(range(n_label), repeat=5):
+        p = np.prod([unary[s, labels[s]] for s in range(5)])
+        for (i, j), d in zip(edges, length):
+            p *= max(np.exp(-lam * (d - d_tt[labels[i], labels[j]]) ** 2), rho**2)
+        joint[labels] = p
+    joint /= joint.sum()
+    exact = np.array([joint.sum(axis=tuple(a for a in range(5) if a != s)) for s in range(5)])
+
+    for schedule in ("serial", "flooding"):
+        res = belief_propagation(mrf, schedule=schedule, iterations=50, tol=1e-12, dtype=np.float64)
+        assert res.converged
+        assert np.abs(res.marginals - exact).max() < 1e-9
+
+
+def test_pairwise_dense_truncates():
+    d = np.array([[0.0, 1.0], [1.0, 0.0]])
+    psi = pairwise_dense(1.0, d, lam=100.0, rho=0.5)
+    assert psi[0, 1] == 1.0
+    assert psi[0, 0] == 0.25
+
+
+def test_schedule_orders():
+    orders = serial_orders(6, 3, seed=1)
+    assert np.array_equal(orders[0], [0, 1, 2, 3, 4, 5, 5, 4, 3, 2, 1, 0])
+    for o in orders[1:]:
+        assert np.array_equal(o[6:], o[:6][::-1])
+        assert sorted(o[:6]) == list(range(6))
+    again = serial_orders(6, 3, seed=1)
+    assert all(np.array_equal(a, b) for a, b in zip(orders, again))
+
+
+def test_incoming_edges():
+    ptr, directed = incoming_edges(np.array([[0, 1], [1, 2]]), 3)
+    assert ptr.tolist() == [0, 1, 3, 4]
+    # into 0: 1->0 (directed 1); into 1: 0->1 (0), 2->1 (3); into 2: 1->2 (2)
+    assert directed.tolist() == [1, 0, 3, 2]
+
+
+def test_bad_arguments():
+    mrf, _ = sphere_problem(5, 50, 2, seed=5)
+    with pytest.raises(ValueError, match="schedule"):
+        belief_propagation(mrf, schedule="random")
+    with pytest.raises(ValueError, match="damping"):
+        belief_propagation(mrf, damping=1.0)
