@@ -1,0 +1,84 @@
+"""The command line: outputs, exit codes and one-line errors."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from intrinsym import cli
+
+SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
+
+
+def run(*args):
+    return subprocess.run(
+        [sys.executable, "-m", "intrinsym.cli", *map(str, args)], capture_output=True, text=True, timeout=300
+    )
+
+
+def test_detect_example_writes_result(tmp_path):
+    out = tmp_path / "spot"
+    p = run("detect", "--example", "-o", out, *SMALL, "--json")
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(p.stdout)
+    assert summary["sizes"]["source"] == 30
+    assert (out / "result.npz").is_file() and (out / "run.json").is_file()
+    with np.load(out / "result.npz") as z:
+        assert z["marginals"].shape == (30, 300)
+
+
+def test_evaluate_command(tmp_path, mirror):
+    v, f, sym = mirror
+    mesh_path = tmp_path / "m.off"
+    with open(mesh_path, "w") as fh:
+        fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
+        np.savetxt(fh, v)
+        np.savetxt(fh, np.column_stack([np.full(len(f), 3), f]), fmt="%d")
+    np.save(tmp_path / "sym.npy", sym)
+    out = tmp_path / "out"
+    assert cli.main(["detect", str(mesh_path), "-o", str(out), "-q", *SMALL]) == 0
+    p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy", "--json")
+    assert p.returncode == 0, p.stderr
+    scores = json.loads(p.stdout)
+    assert 0.0 <= scores["mirror_hit"] <= 1.0 and scores["n_scored"] > 0
+    assert json.loads((out / "scores.json").read_text()) == scores
+
+
+@pytest.mark.parametrize(
+    "content,name,match",
+    [
+        ("", "empty.off", "empty"),
+        ("OFF\n4 1 0\n0 0 0\n1 0 0\n", "short.off", "truncated"),
+        ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", "word.off", "numeric"),
+        ("hello", "shape.foo", "unknown file type"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_no_output(tmp_path, content, name, match):
+    path = tmp_path / name
+    path.write_text(content)
+    out = tmp_path / "out"
+    p = run("detect", path, "-o", out)
+    assert p.returncode == 2
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1, p.stderr
+    assert name in lines[0] and match in lines[0].lower()
+    assert "Traceback" not in p.stderr
+    assert not out.exists()
+
+
+def test_missing_file_and_bad_parameters(tmp_path):
+    p = run("detect", tmp_path / "nope.off", "-o", tmp_path / "o")
+    assert p.returncode == 2 and "nope.off" in p.stderr and "Traceback" not in p.stderr
+    p = run("detect", "--example", "-o", tmp_path / "o", "--rho", "2")
+    assert p.returncode == 2 and "rho" in p.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_help_documents_every_option():
+    text = cli.build_parser()._subparsers._group_actions[0].choices["detect"].format_help()
+    for flag, *_ in cli.MODEL_OPTIONS:
+        assert flag in text
+    for flag in ("--preset", "--remove-trivial", "--keep-trivial", "--example", "--quiet", "--json"):
+        assert flag in text

@@ -1,0 +1,135 @@
+"""End-to-end detect / match on small problems: contracts, determinism, scale-freedom."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+import intrinsym
+from intrinsym import pipeline
+from intrinsym.mesh import Shape
+
+SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
+
+
+@pytest.fixture(scope="module")
+def spot():
+    return intrinsym.load(intrinsym.example_path())
+
+
+@pytest.fixture(scope="module")
+def spot_result(spot):
+    return intrinsym.detect(spot, **SMALL)
+
+
+def test_result_contract(spot, spot_result, tmp_path):
+    r = spot_result
+    s, t = 40, 400
+    assert r.source_points.shape == (s, 3) and r.source_points.dtype == np.float64
+    assert r.target_points.shape == (t, 3)
+    assert r.source_vertex.dtype == np.int64 and r.target_vertex.dtype == np.int64
+    assert r.unary.shape == (s, t) and r.unary.dtype == np.float32
+    assert r.marginals.shape == (s, t) and r.marginals.dtype == np.float32
+    assert np.allclose(r.marginals.sum(axis=1), 1.0, atol=1e-5)
+    assert r.edges.dtype == np.int64 and r.edges.shape[1] == 2
+    assert np.all(r.edges[:, 0] < r.edges[:, 1]) and r.edges.max() < s
+    # samples are on the input surface: the nearest input vertex is close
+    gap = np.linalg.norm(spot.vertices[r.source_vertex] - r.source_points, axis=1)
+    assert gap.max() < 0.05 * np.ptp(spot.vertices, axis=0).max()
+    # every sample has a neighbour, and the graph is connected-ish (each degree >= 1)
+    assert np.bincount(r.edges.ravel(), minlength=s).min() >= 1
+
+    out = r.save(tmp_path / "out")
+    run = json.loads((out / "run.json").read_text())
+    for key in ("params", "sizes", "seconds", "bp", "versions", "resolved"):
+        assert key in run
+    assert run["bp"]["iterations"] >= 1 and isinstance(run["bp"]["converged"], bool)
+    assert run["params"]["n_source"] == s
+    again = intrinsym.Result.load(out)
+    assert np.array_equal(again.marginals, r.marginals)
+    assert again.params == r.params
+    with np.load(out / "result.npz") as z:
+        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS)
+
+
+def test_deterministic_for_a_seed(spot, spot_result):
+    again = intrinsym.detect(spot, **SMALL)
+    assert np.array_equal(again.marginals, spot_result.marginals)
+    other = intrinsym.detect(spot, seed=1, **SMALL)
+    assert not np.array_equal(other.source_vertex, spot_result.source_vertex)
+
+
+def test_scale_free(spot, spot_result):
+    big = Shape(spot.vertices * 1000.0 + 5.0, spot.faces)
+    r = intrinsym.detect(big, **SMALL)
+    assert np.array_equal(r.source_vertex, spot_result.source_vertex)
+    assert np.array_equal(r.target_vertex, spot_result.target_vertex)
+    assert np.abs(r.marginals - spot_result.marginals).max() < 1e-4
+    assert np.allclose(r.source_points, spot_result.source_points * 1000.0 + 5.0)
+
+
+def test_trivial_match_removed_and_kept(spot):
+    kept = intrinsym.detect(spot, remove_trivial=False, **SMALL)
+    removed = intrinsym.detect(spot, remove_trivial=True, **SMALL)
+    assert np.array_equal(kept.target_vertex, removed.target_vertex)
+    floor = np.float32(1.0 / (1.0 + 1.0 / 0.01))
+    # Euclidean distance is a lower bound of the geodesic one: every target this close
+    # to its source point lies inside the removed radius (0.05 sqrt(area)).
+    area = intrinsym.mesh.surface_area(spot)
+    d = np.linalg.norm(kept.source_points[:, None] - kept.target_points[None], axis=2) / np.sqrt(area)
+    inside = d < 0.05
+    assert inside.sum() >= len(d)
+    assert np.all(removed.unary[inside] == floor)
+    # the identity holds several times its chance share of the kept model's mass (the
+    # share of targets inside the radius) and less than chance once removed
+    chance = inside.mean()
+    assert kept.marginals[inside].sum() / len(d) > 3 * chance
+    assert removed.marginals[inside].sum() / len(d) < chance
+
+
+def test_paper_preset():
+    p = pipeline.make_params("paper")
+    assert (p.rho, p.gamma, p.schedule, p.iterations, p.remove_trivial) == (0.4, 0.01, "serial", 100, False)
+    assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
+    with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
+        pipeline.make_params(rhoo=0.3)
+    with pytest.raises(intrinsym.ParameterError, match="rho"):
+        pipeline.make_params(rho=1.5)
+
+
+def test_point_cloud_input(spot):
+    r = intrinsym.detect((spot.vertices, None), n_source=30, n_target=300, iterations=5)
+    assert r.marginals.shape == (30, 300)
+    assert np.allclose(r.marginals.sum(axis=1), 1.0, atol=1e-5)
+
+
+def bumpy_shape() -> Shape:
+    """An icosphere with random bumps and unequal axes: no intrinsic symmetry."""
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    v = sphere.vertices.copy()
+    rng = np.random.default_rng(3)
+    for c in rng.normal(size=(6, 3)):
+        c /= np.linalg.norm(c)
+        v += 0.25 * np.exp(-np.sum((sphere.vertices - c) ** 2, axis=1) / 0.15)[:, None] * sphere.vertices * rng.uniform(0.5, 1.5)
+    return Shape(v * [1.0, 1.4, 0.8], np.asarray(sphere.faces))
+
+
+def test_match_two_shapes():
+    a = bumpy_shape()
+    rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    moved = Shape(a.vertices @ rot.T * 3.0, a.faces)
+    r = intrinsym.match(a, moved, n_source=30, n_target=1500, spin_radius=0.2, spin_cloud=20000, iterations=10)
+    assert r.marginals.shape == (30, 1500)
+    assert r.info["mode"] == "match"
+    # a rotated, scaled copy: the MAP target of most source points is its own image
+    image = a.vertices[r.source_vertex] @ rot.T * 3.0
+    best = r.target_points[r.marginals.argmax(axis=1)]
+    err = np.linalg.norm(best - image, axis=1) / (3.0 * np.ptp(a.vertices, axis=0).max())
+    assert np.mean(err < 0.1) >= 0.75
+
+
+def test_too_many_samples_is_a_parameter_error():
+    v = np.random.default_rng(0).normal(size=(50, 3))
+    with pytest.raises(intrinsym.ParameterError, match="asked for"):
+        intrinsym.detect((v, None), n_source=10, n_target=100)
