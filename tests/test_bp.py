@@ -12,8 +12,13 @@ from intrinsym.bp import (
     belief_propagation,
     belief_propagation_dense,
     incoming_edges,
+    resolve_backend,
+    schedule_steps,
     serial_orders,
+    skip_bound,
+    weight_polynomial,
 )
+from intrinsym import bp_gpu
 from intrinsym.geodesics import SparseDistances
 from intrinsym.model import MRF, lambda_for_tolerance, pairwise_dense
 
@@ -139,12 +144,27 @@ def test_pairwise_dense_truncates():
 
 def test_schedule_orders():
     orders = serial_orders(6, 3, seed=1)
-    assert np.array_equal(orders[0], [0, 1, 2, 3, 4, 5, 5, 4, 3, 2, 1, 0])
+    assert np.array_equal(orders[0], np.arange(6))
     for o in orders[1:]:
-        assert np.array_equal(o[6:], o[:6][::-1])
-        assert sorted(o[:6]) == list(range(6))
+        assert sorted(o) == list(range(6))
     again = serial_orders(6, 3, seed=1)
     assert all(np.array_equal(a, b) for a, b in zip(orders, again))
+
+
+def test_serial_steps_update_every_directed_edge_once():
+    """Path 0-1-2 plus edge 0-2, order (1, 0, 2): hand-checked forward/backward sends."""
+    edges = np.array([[0, 1], [1, 2], [0, 2]])
+    ptr, directed = incoming_edges(edges, 3)
+    steps = schedule_steps("serial", np.array([1, 0, 2]), edges, ptr, directed)
+    assert steps.node.tolist() == [1, 0, 2, 2, 0, 1]
+    sent = [sorted(steps.out[steps.ptr[k] : steps.ptr[k + 1]].tolist()) for k in range(6)]
+    # forward: 1 -> 0 (edge 0 reversed: 1), 1 -> 2 (2); 0 -> 2 (4); 2 sends nothing
+    # backward: 2 -> 0 (5), 2 -> 1 (3); 0 -> 1 (0); 1 sends nothing
+    assert sent == [[1, 2], [4], [], [3, 5], [0], []]
+    assert sorted(steps.out.tolist()) == list(range(6))
+    flood = schedule_steps("flooding", np.arange(3), edges, ptr, directed)
+    assert flood.node.tolist() == [0, 1, 2]
+    assert sorted(flood.out.tolist()) == list(range(6))
 
 
 def test_incoming_edges():
@@ -160,3 +180,68 @@ def test_bad_arguments():
         belief_propagation(mrf, schedule="random")
     with pytest.raises(ValueError, match="damping"):
         belief_propagation(mrf, damping=1.0)
+
+
+@pytest.mark.parametrize("rho,tol", [(0.6, 1e-13), (0.4, 1e-12), (0.2, 1e-9), (0.1, 1e-8)])
+def test_weight_polynomial_matches_exp(rho, tol):
+    t = np.linspace(0.0, 1.0, 10001)
+    exact = np.exp(-np.log(1 / rho**2) * t) - rho**2
+    assert np.abs(np.polynomial.polynomial.polyval(t, weight_polynomial(1.0, rho)) - exact).max() < tol
+
+
+def test_skip_bound_hand_checked():
+    # rho = 0.5: r = skip * 0.75 / 0.25 = 3 skip; bound r / (1 - r)
+    assert skip_bound(0.0, 0.5) == 0.0
+    assert skip_bound(0.1, 0.5) == pytest.approx(0.3 / 0.7)
+    assert skip_bound(0.5, 0.5) == np.inf
+
+
+def test_skipping_stays_within_its_bound():
+    """One flooding iteration from uniform messages: every message is within
+    b = skip_bound of the exact one, so every belief (a product of deg messages,
+    normalised) is within ((1 + b) / (1 - b))^deg - 1, relative."""
+    mrf, _ = sphere_problem(30, 800, 4, seed=6)
+    # a unary spanning four decades, as a peaked posterior does, so that labels get skipped
+    unary = 10.0 ** np.random.default_rng(6).uniform(-4, 0, size=mrf.unary.shape)
+    mrf = MRF(unary, mrf.edges, mrf.edge_length, mrf.targets, mrf.lam, mrf.rho)
+    deg = np.bincount(mrf.edges.ravel(), minlength=mrf.n_source)
+    kw = dict(schedule="flooding", iterations=1, tol=0.0, dtype=np.float64)
+    exact = belief_propagation(mrf, **kw).marginals
+    for skip in (0.01, 0.05):
+        approx = belief_propagation(mrf, skip=skip, **kw).marginals
+        b = skip_bound(skip, mrf.rho)
+        rel = np.abs(approx / exact - 1.0).max(axis=1)
+        assert np.all(rel <= ((1 + b) / (1 - b)) ** deg - 1.0)
+        assert rel.max() > 1e-9  # labels were really skipped
+    # serial BP to convergence with a small threshold stays close to exact
+    kw = dict(schedule="serial", iterations=30, tol=1e-7, dtype=np.float64)
+    exact = belief_propagation(mrf, **kw).marginals
+    approx = belief_propagation(mrf, skip=1e-3, **kw).marginals
+    b = skip_bound(1e-3, mrf.rho)
+    assert np.abs(approx / exact - 1.0).max() <= ((1 + b) / (1 - b)) ** deg.max() - 1.0
+
+
+def test_backend_choice():
+    assert resolve_backend("cpu", "serial") == "cpu"
+    assert resolve_backend("auto", "serial") == "cpu"
+    with pytest.raises(ValueError, match="backend"):
+        resolve_backend("tpu", "serial")
+    if bp_gpu.available():
+        assert resolve_backend("auto", "flooding") == "gpu"
+        with pytest.raises(ValueError, match="flooding"):
+            resolve_backend("gpu", "serial")
+    else:
+        assert resolve_backend("auto", "flooding") == "cpu"
+        with pytest.raises(ValueError, match="CuPy"):
+            resolve_backend("gpu", "flooding")
+
+
+@pytest.mark.skipif(not bp_gpu.available(), reason="needs CuPy and a CUDA device")
+@pytest.mark.parametrize("damping", [0.0, 0.3])
+def test_gpu_equals_cpu_flooding(damping):
+    mrf, _ = sphere_problem(40, 2000, 4, seed=8)
+    kw = dict(schedule="flooding", iterations=8, tol=0.0, damping=damping)
+    cpu = belief_propagation(mrf, dtype=np.float64, backend="cpu", **kw)
+    gpu = belief_propagation(mrf, backend="gpu", **kw)
+    assert gpu.iterations == cpu.iterations
+    assert np.abs(gpu.marginals / cpu.marginals - 1.0).max() < 1e-4

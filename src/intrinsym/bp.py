@@ -5,13 +5,14 @@ Two implementations share one schedule and one normalisation:
 * :func:`belief_propagation` — the exact sparse ring message of DESIGN.md in Numba.
   Because Psi = max(psi, rho^2) (Eq. 6), the message of Eq. 7 splits into
   ``rho^2 * sum(h) + sum_{|d(fs,fq) - d(s,q)| < delta} (psi - rho^2) h(fs)``, and the
-  second sum runs over a contiguous slice of the distance-sorted target row.
+  second sum runs over a contiguous slice of the distance-sorted row of fs.
 * :func:`belief_propagation_dense` — the paper-literal O(|Pt|^2) message in NumPy,
   the test oracle.
 
 Messages are max-normalised (they then lie in [rho^2, 1], so products of a dozen stay
 far from float32 underflow). A message is stored per directed edge: undirected edge e
-joining (i, j) gives directed edge 2e for i -> j and 2e + 1 for j -> i.
+joining (i, j) gives directed edge 2e for i -> j and 2e + 1 for j -> i. Every iteration
+updates every directed edge exactly once (:func:`schedule_steps`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,10 @@ import numpy as np
 from .model import MRF, pairwise_dense
 
 SCHEDULES = ("serial", "flooding")
+BACKENDS = ("auto", "cpu", "gpu")
+
+# Degree of the polynomial that replaces exp in psi - rho^2 (see weight_polynomial).
+WEIGHT_DEGREE = 11
 
 
 @dataclass
@@ -46,6 +51,8 @@ class BPResult:
         ``max_change`` after every iteration.
     seconds : list of float
         Wall time of every iteration.
+    setup_seconds : float
+        Wall time spent before the first iteration (ring bounds, tables, buffers).
     """
 
     marginals: np.ndarray
@@ -54,6 +61,7 @@ class BPResult:
     max_change: float
     history: list[float] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
+    setup_seconds: float = 0.0
 
 
 def incoming_edges(edges: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -86,18 +94,83 @@ def serial_orders(n_nodes: int, iterations: int, seed: int) -> list[np.ndarray]:
     """Node order of every serial iteration (paper Sec. 4).
 
     The first iteration visits nodes in index order, later ones in a random order; each
-    iteration is a forward pass followed by the backward (reversed) pass.
+    iteration is a forward pass in this order, then the backward (reversed) pass.
 
     Returns
     -------
-    list of (2 n_nodes,) int64 arrays, one per iteration.
+    list of (n_nodes,) int64 arrays, one per iteration.
     """
     rng = np.random.default_rng(seed)
-    orders = []
-    for it in range(iterations):
-        order = np.arange(n_nodes) if it == 0 else rng.permutation(n_nodes)
-        orders.append(np.concatenate([order, order[::-1]]).astype(np.int64))
-    return orders
+    return [
+        (np.arange(n_nodes) if it == 0 else rng.permutation(n_nodes)).astype(np.int64)
+        for it in range(iterations)
+    ]
+
+
+@dataclass(frozen=True)
+class Steps:
+    """The message updates of one iteration: nodes in visiting order and what each sends.
+
+    Attributes
+    ----------
+    node : (K,) int64
+        The node of every step.
+    ptr : (K + 1,) int64
+        Step k sends the directed edges ``out[ptr[k]:ptr[k+1]]``.
+    out : (2E,) int64
+        Directed edges, each exactly once; those of step k leave ``node[k]``.
+    """
+
+    node: np.ndarray
+    ptr: np.ndarray
+    out: np.ndarray
+
+
+def schedule_steps(
+    schedule: str, order: np.ndarray, edges: np.ndarray, ptr: np.ndarray, directed: np.ndarray
+) -> Steps:
+    """One iteration of a schedule, updating every directed edge exactly once.
+
+    "serial" (paper Sec. 4): the forward pass visits ``order`` and node s sends to the
+    neighbours that come after it; the backward pass visits the reversed order and s
+    sends to the neighbours that come before it, so each message is computed from the
+    latest incoming ones and never twice. "flooding": every node sends to all its
+    neighbours from the previous iteration's messages (the caller double-buffers).
+
+    Parameters
+    ----------
+    schedule : {"serial", "flooding"}
+    order : (S,) int64
+        A permutation of the nodes.
+    edges : (E, 2) int
+    ptr, directed : from :func:`incoming_edges`
+
+    Returns
+    -------
+    Steps
+    """
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    order = np.asarray(order, dtype=np.int64)
+    n = len(order)
+    rank = np.empty(n, dtype=np.int64)
+    rank[order] = np.arange(n)
+    sender = edges[directed >> 1, directed & 1]  # q of every incoming edge q -> s
+    receiver = np.repeat(np.arange(n), np.diff(ptr))  # s
+    if schedule == "flooding":
+        passes = [(order, np.ones(len(directed), dtype=bool))]
+    else:
+        later = rank[sender] > rank[receiver]
+        passes = [(order, later), (order[::-1], ~later)]
+    nodes, outs, counts = [], [], []
+    for visit, mask in passes:
+        for s in visit:
+            sel = directed[ptr[s] : ptr[s + 1]][mask[ptr[s] : ptr[s + 1]]]
+            outs.append(sel ^ 1)
+            counts.append(len(sel))
+        nodes.append(visit)
+    step_ptr = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=step_ptr[1:])
+    return Steps(np.concatenate(nodes), step_ptr, np.concatenate(outs).astype(np.int64))
 
 
 def beliefs(unary: np.ndarray, messages: np.ndarray, ptr: np.ndarray, directed: np.ndarray) -> np.ndarray:
@@ -115,84 +188,141 @@ def beliefs(unary: np.ndarray, messages: np.ndarray, ptr: np.ndarray, directed: 
     return b
 
 
-@nb.njit(cache=True, inline="always")
-def _first_above(dist, lo, hi, x):
-    """First k in [lo, hi) with dist[k] > x (dist ascending)."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if dist[mid] > x:
-            hi = mid
-        else:
-            lo = mid + 1
-    return lo
+def skip_bound(skip: float, rho: float) -> float:
+    """Largest relative error of a max-normalised message computed with label skipping.
 
+    Skipping the labels fs whose h(fs) < skip * mean(h) drops at most ``skip * sum(h)``
+    of weight, each unit of it contributing at most 1 - rho^2 to a message entry that is
+    at least rho^2 * sum(h); max-normalisation at most turns the relative error r of the
+    raw message into r / (1 - r).
 
-@nb.njit(cache=True, inline="always")
-def _first_at_least(dist, lo, hi, x):
-    """First k in [lo, hi) with dist[k] >= x (dist ascending)."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if dist[mid] >= x:
-            hi = mid
-        else:
-            lo = mid + 1
-    return lo
+    Parameters
+    ----------
+    skip : float >= 0
+    rho : float in (0, 1)
+
+    Returns
+    -------
+    float
+    """
+    r = skip * (1.0 - rho**2) / rho**2
+    return r / (1.0 - r) if r < 1.0 else np.inf
 
 
 @nb.njit(parallel=True, cache=True)
-def _update_node(
-    s, read, write, unary, ptr, directed, edge_length,
-    indptr, indices, dist, delta, lam, rho2, damping, prod, h, m,
+def _ring_bounds(indptr, dist, edge_length, delta, lo, hi):
+    n_t = len(indptr) - 1
+    for e in nb.prange(len(edge_length)):
+        a = edge_length[e] - delta
+        b = edge_length[e] + delta
+        for f in range(n_t):
+            row = dist[indptr[f] : indptr[f + 1]]
+            left = np.searchsorted(row, a, side="right")
+            right = np.searchsorted(row, b, side="left")
+            lo[e, f] = indptr[f] + left
+            hi[e, f] = indptr[f] + max(left, right)
+
+
+def ring_bounds(
+    indptr: np.ndarray, dist: np.ndarray, edge_length: np.ndarray, delta: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Slice of every distance row inside the ring of every edge, computed once.
+
+    The ring of row fs for edge (s, q) depends only on d(s, q), which is fixed per edge,
+    so the binary searches are done here and not in every iteration.
+
+    Parameters
+    ----------
+    indptr : (T + 1,) int64
+    dist : (nnz,) float
+        Row-sorted distances of :class:`~intrinsym.geodesics.SparseDistances`.
+    edge_length : (E,) float64
+    delta : float
+
+    Returns
+    -------
+    lo, hi : (E, T) int32 (int64 when nnz >= 2^31)
+        Row fs of edge e: the entries ``lo[e, fs] <= j < hi[e, fs]`` are those with
+        ``|dist[j] - edge_length[e]| < delta``.
+    """
+    index = np.int32 if len(dist) < 2**31 else np.int64
+    lo = np.empty((len(edge_length), len(indptr) - 1), dtype=index)
+    hi = np.empty_like(lo)
+    _ring_bounds(indptr, dist, np.asarray(edge_length, dtype=np.float64), float(delta), lo, hi)
+    return lo, hi
+
+
+@nb.njit(parallel=True, cache=True, fastmath=True)
+def _sweep(
+    steps_node, steps_ptr, steps_out, read, write, unary, ptr, directed, ring_length,
+    lo, hi, indices, dist, coef, inv_delta2, rho2, damping, skip, prod, h, acc,
 ):
-    """Send every message leaving node s; return the largest change.
+    """Run one iteration of message updates; return the largest change.
 
     ``read`` holds the incoming messages, ``write`` receives the outgoing ones (the same
-    array in the serial schedule). The product of all incoming messages is formed once;
-    the message to q divides q's own message out, which is safe because every message
-    is bounded below by rho^2 (DESIGN.md, "Known traps").
+    array in the serial schedule). For each step's node the product of all incoming
+    messages is formed once; the message to q divides q's own message out, which is safe
+    because every message is bounded below by rho^2 (DESIGN.md, "Known traps"). The ring
+    sum is pushed from each label fs along its own row (rows are symmetric), so labels
+    with negligible h are skipped whole; every thread accumulates into its own row of
+    ``acc`` (n_chunks, T).
     """
     n_t = unary.shape[1]
-    a = ptr[s]
-    b = ptr[s + 1]
-    for f in nb.prange(n_t):
-        p = np.float64(unary[s, f])
-        for k in range(a, b):
-            p *= read[directed[k], f]
-        prod[f] = p
+    c0, c1, c2, c3, c4, c5 = coef[0], coef[1], coef[2], coef[3], coef[4], coef[5]
+    c6, c7, c8, c9, c10, c11 = coef[6], coef[7], coef[8], coef[9], coef[10], coef[11]
+    inv = inv_delta2[0]
+    zero = inv - inv
+    n_chunks = acc.shape[0]
+    chunk = (n_t + n_chunks - 1) // n_chunks
     change = 0.0
-    for k in range(a, b):
-        back = directed[k]
-        out = back ^ 1
-        d_sq = edge_length[out >> 1]
-        hsum = 0.0
+    for k in range(len(steps_node)):
+        s = steps_node[k]
+        a = ptr[s]
+        b = ptr[s + 1]
         for f in nb.prange(n_t):
-            v = prod[f] / read[back, f]
-            h[f] = v
-            hsum += v
-        lo_d = d_sq - delta
-        hi_d = d_sq + delta
-        mmax = 0.0
-        for fq in nb.prange(n_t):
-            r0 = indptr[fq]
-            r1 = indptr[fq + 1]
-            lo = _first_above(dist, r0, r1, lo_d)
-            hi = _first_at_least(dist, lo, r1, hi_d)
-            acc = 0.0
-            for j in range(lo, hi):
-                diff = dist[j] - d_sq
-                w = np.exp(-lam * diff * diff) - rho2
-                if w > 0.0:
-                    acc += w * h[indices[j]]
-            v = rho2 * hsum + acc
-            m[fq] = v
-            mmax = max(mmax, v)
-        local = 0.0
-        for fq in nb.prange(n_t):
-            old = write[out, fq]
-            v = (1.0 - damping) * (m[fq] / mmax) + damping * old
-            write[out, fq] = v
-            local = max(local, abs(v - old))
-        change = max(change, local)
+            p = np.float64(unary[s, f])
+            for i in range(a, b):
+                p *= read[directed[i], f]
+            prod[f] = p
+        for i in range(steps_ptr[k], steps_ptr[k + 1]):
+            out = steps_out[i]
+            back = out ^ 1
+            e = out >> 1
+            d_sq = ring_length[e]
+            hsum = 0.0
+            for f in nb.prange(n_t):
+                v = prod[f] / read[back, f]
+                h[f] = v
+                hsum += v
+            tau = skip * hsum / n_t
+            for c in nb.prange(n_chunks):
+                buf = acc[c]
+                buf[:] = 0.0
+                for fs in range(c * chunk, min(n_t, (c + 1) * chunk)):
+                    hv = h[fs]
+                    if hv < tau:
+                        continue
+                    for j in range(lo[e, fs], hi[e, fs]):
+                        x = dist[j] - d_sq
+                        t = x * x * inv
+                        w = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * (c5 + t * (
+                            c6 + t * (c7 + t * (c8 + t * (c9 + t * (c10 + t * c11))))))))))
+                        buf[indices[j]] += max(w, zero) * hv
+            base = rho2 * hsum
+            mmax = 0.0
+            for fq in nb.prange(n_t):
+                v = base
+                for c in range(n_chunks):
+                    v += acc[c, fq]
+                acc[0, fq] = v
+                mmax = max(mmax, v)
+            local = 0.0
+            for fq in nb.prange(n_t):
+                old = write[out, fq]
+                v = (1.0 - damping) * (acc[0, fq] / mmax) + damping * old
+                write[out, fq] = v
+                local = max(local, abs(v - old))
+            change = max(change, local)
     return change
 
 
@@ -207,6 +337,60 @@ def _check(mrf_unary: np.ndarray, schedule: str, iterations: int, damping: float
         raise ValueError("unary potentials must be finite and positive")
 
 
+def resolve_backend(backend: str, schedule: str) -> str:
+    """The backend that runs: "cpu" or "gpu".
+
+    "auto" picks the GPU when CuPy sees a CUDA device and the schedule is "flooding"
+    (the only one the GPU backend runs), else the CPU. "gpu" without a usable GPU or
+    with the serial schedule is an error.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
+    if backend == "cpu":
+        return "cpu"
+    from . import bp_gpu
+
+    usable = bp_gpu.available()
+    if backend == "gpu":
+        if not usable:
+            raise ValueError("backend 'gpu' needs CuPy and a CUDA device (pip install intrinsym[gpu])")
+        if schedule != "flooding":
+            raise ValueError("the GPU backend runs the flooding schedule only")
+        return "gpu"
+    return "gpu" if usable and schedule == "flooding" else "cpu"
+
+
+def iterate(
+    update: Callable[[int], float],
+    iterations: int,
+    tol: float,
+    progress: Callable[[int, float], None] | None,
+) -> tuple[list[float], list[float], bool]:
+    """Call ``update(iteration)`` (returns the largest message change) until convergence.
+
+    Returns
+    -------
+    history : list of float
+        The change after every iteration.
+    seconds : list of float
+        Wall time of every iteration.
+    converged : bool
+        Whether the change fell below ``tol``.
+    """
+    history: list[float] = []
+    seconds: list[float] = []
+    for it in range(iterations):
+        t0 = time.perf_counter()
+        change = float(update(it))
+        seconds.append(time.perf_counter() - t0)
+        history.append(change)
+        if progress is not None:
+            progress(it + 1, change)
+        if change < tol:
+            return history, seconds, True
+    return history, seconds, False
+
+
 def _run(
     unary: np.ndarray,
     edges: np.ndarray,
@@ -215,34 +399,51 @@ def _run(
     tol: float,
     seed: int,
     dtype: type,
-    sweep: Callable[[np.ndarray, np.ndarray, np.ndarray], float],
+    sweep: Callable[[np.ndarray, np.ndarray, Steps], float],
     progress: Callable[[int, float], None] | None,
+    started: float,
 ) -> BPResult:
-    """Iterate a node-update ``sweep(read, write, order)`` to convergence."""
+    """Iterate ``sweep(read, write, steps)`` to convergence."""
     n_s, n_t = unary.shape
     ptr, directed = incoming_edges(edges, n_s)
     messages = np.ones((2 * len(edges), n_t), dtype=dtype)
     orders = serial_orders(n_s, iterations, seed)
-    history: list[float] = []
-    seconds: list[float] = []
-    converged = False
-    for it in range(iterations):
-        t0 = time.perf_counter()
+
+    def update(it: int) -> float:
+        nonlocal messages
         if schedule == "serial":
-            change = sweep(messages, messages, orders[it])
-        else:
-            new = messages.copy()
-            change = sweep(messages, new, orders[0][:n_s])
-            messages = new
-        seconds.append(time.perf_counter() - t0)
-        history.append(float(change))
-        if progress is not None:
-            progress(it + 1, float(change))
-        if change < tol:
-            converged = True
-            break
+            return sweep(messages, messages, schedule_steps(schedule, orders[it], edges, ptr, directed))
+        new = messages.copy()
+        change = sweep(messages, new, schedule_steps(schedule, orders[0], edges, ptr, directed))
+        messages = new
+        return change
+
+    setup = time.perf_counter() - started
+    history, seconds, converged = iterate(update, iterations, tol, progress)
     marg = beliefs(unary, messages, ptr, directed).astype(dtype)
-    return BPResult(marg, len(history), converged, history[-1] if history else 0.0, history, seconds)
+    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup)
+
+
+def weight_polynomial(lam: float, rho: float) -> np.ndarray:
+    """Polynomial in t = (x / delta)^2 equal to psi - rho^2 = exp(-lam x^2) - rho^2.
+
+    x = |d(fs,fq) - d(s,q)| in [0, delta], so t in [0, 1] and psi - rho^2 =
+    exp(-ln(1/rho^2) t) - rho^2. Numba's exp in a loop stays scalar (no SVML in pip
+    builds), while a Horner polynomial vectorises: per message at |Pt| = 12722 it measured
+    2.7x faster than exp and 1.7-2x faster than a lookup table with linear interpolation.
+    Chebyshev interpolation of degree :data:`WEIGHT_DEGREE`; largest error on [0, 1]:
+    2e-15 (rho 0.6), 2e-13 (rho 0.4), 7e-11 (rho 0.2), 3e-9 (rho 0.1), 4e-8 (rho 0.05).
+
+    Returns
+    -------
+    (WEIGHT_DEGREE + 1,) float64
+        Power-basis coefficients, constant term first.
+    """
+    rate = np.log(1.0 / rho**2)
+    cheb = np.polynomial.Chebyshev.interpolate(
+        lambda t: np.exp(-rate * t) - rho**2, WEIGHT_DEGREE, domain=[0.0, 1.0]
+    )
+    return cheb.convert(kind=np.polynomial.Polynomial).coef
 
 
 def belief_propagation(
@@ -254,6 +455,8 @@ def belief_propagation(
     seed: int = 0,
     dtype: type = np.float32,
     progress: Callable[[int, float], None] | None = None,
+    skip: float = 0.0,
+    backend: str = "cpu",
 ) -> BPResult:
     """Loopy sum-product BP with the exact sparse ring message.
 
@@ -264,8 +467,8 @@ def belief_propagation(
         ``mrf.edge_length.max() + mrf.delta``, else the message would not be exact.
     schedule : {"serial", "flooding"}
         "serial": the paper's forward and backward sweeps, index order first, then random
-        orders; every node sends to all neighbours from the latest messages.
-        "flooding": every message is recomputed from the previous iteration's messages.
+        orders (see :func:`schedule_steps`). "flooding": every message is recomputed from
+        the previous iteration's messages.
     iterations : int
         Maximum number of iterations T (paper: 100).
     tol : float
@@ -275,15 +478,52 @@ def belief_propagation(
     seed : int
         Seed of the random serial orders.
     dtype : numpy float type
-        Message storage; arithmetic is float64 throughout.
+        Storage of messages and of the working arrays of a message; products over
+        incoming messages are formed in float64.
     progress : callable(iteration, max_change), optional
+    skip : float >= 0
+        0 (default) is exact. Otherwise labels fs with h(fs) < skip * mean(h) send
+        nothing but their share of rho^2 * sum(h); every message is then within
+        :func:`skip_bound` (relative) of the exact message from the same inputs.
+    backend : {"auto", "cpu", "gpu"}
+        See :func:`resolve_backend`. The GPU backend (CuPy, :mod:`intrinsym.bp_gpu`)
+        stores float32 messages and computes exactly (``skip`` is ignored there).
 
     Returns
     -------
     BPResult
     """
+    started = time.perf_counter()
     _check(mrf.unary, schedule, iterations, damping)
+    if resolve_backend(backend, schedule) == "gpu":
+        from . import bp_gpu
+
+        return bp_gpu.belief_propagation_gpu(mrf, iterations, tol, damping, progress)
+    sweep = sparse_sweep(mrf, dtype, damping, skip)
+    return _run(mrf.unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress, started)
+
+
+def sparse_sweep(
+    mrf: MRF, dtype: type = np.float32, damping: float = 0.0, skip: float = 0.0
+) -> Callable[[np.ndarray, np.ndarray, Steps], float]:
+    """Set up the sparse kernel once: ring bounds, weight polynomial, buffers.
+
+    Parameters
+    ----------
+    mrf, dtype, damping, skip
+        As in :func:`belief_propagation`.
+
+    Returns
+    -------
+    callable(read, write, steps) -> float
+        Updates the messages of ``steps`` (read from ``read``, (2E, T), written to
+        ``write``) and returns the largest change.
+    """
+    if not skip >= 0.0:
+        raise ValueError(f"skip must be non-negative, got {skip}")
     delta = mrf.delta
+    if not np.isfinite(delta):
+        raise ValueError(f"lambda must be positive, got {mrf.lam}")
     if len(mrf.edge_length) and mrf.targets.radius < mrf.edge_length.max() + delta - 1e-12:
         raise ValueError(
             f"target distances reach {mrf.targets.radius:.4g}, but the exact message needs "
@@ -294,22 +534,25 @@ def belief_propagation(
     edge_length = np.ascontiguousarray(mrf.edge_length, dtype=np.float64)
     unary = np.ascontiguousarray(mrf.unary)
     tg = mrf.targets
+    dist = tg.dist.astype(dtype)
+    indices = tg.indices.astype(np.int32 if n_t < 2**31 else np.int64)
+    # the ring sum runs in the storage precision (float32: twice the SIMD width)
+    coef = weight_polynomial(mrf.lam, mrf.rho).astype(dtype)
+    ring_length = edge_length.astype(dtype)
+    inv_delta2 = np.array([1.0 / delta**2], dtype=dtype)
+    lo, hi = ring_bounds(tg.indptr, tg.dist, edge_length, delta)
     prod = np.empty(n_t)
-    h = np.empty(n_t)
-    m = np.empty(n_t)
+    h = np.empty(n_t, dtype=dtype)
+    acc = np.empty((max(1, nb.get_num_threads()), n_t), dtype=dtype)
     rho2 = mrf.rho**2
 
-    def sweep(read: np.ndarray, write: np.ndarray, order: np.ndarray) -> float:
-        change = 0.0
-        for s in order:
-            c = _update_node(
-                s, read, write, unary, ptr, directed, edge_length,
-                tg.indptr, tg.indices, tg.dist, delta, mrf.lam, rho2, damping, prod, h, m,
-            )
-            change = max(change, c)
-        return change
+    def sweep(read: np.ndarray, write: np.ndarray, steps: Steps) -> float:
+        return _sweep(
+            steps.node, steps.ptr, steps.out, read, write, unary, ptr, directed, ring_length,
+            lo, hi, indices, dist, coef, inv_delta2, rho2, damping, skip, prod, h, acc,
+        )
 
-    return _run(unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress)
+    return sweep
 
 
 def belief_propagation_dense(
@@ -327,9 +570,10 @@ def belief_propagation_dense(
 ) -> BPResult:
     """Paper-literal BP (Eq. 7 with the full |Pt| x |Pt| pairwise table); the oracle.
 
-    Same schedule, normalisation and stopping rule as :func:`belief_propagation`, but
-    the product over incoming messages excludes the recipient explicitly and the message
-    is a dense matrix-vector product. Float64 throughout. Use on small problems only.
+    Same schedule (:func:`schedule_steps`), normalisation and stopping rule as
+    :func:`belief_propagation`, but the product over incoming messages excludes the
+    recipient explicitly and the message is a dense matrix-vector product. Float64
+    throughout. Use on small problems only.
 
     Parameters
     ----------
@@ -341,20 +585,20 @@ def belief_propagation_dense(
     lam, rho, schedule, iterations, tol, damping, seed
         As in :func:`belief_propagation`.
     """
+    started = time.perf_counter()
     _check(unary, schedule, iterations, damping)
     unary = np.asarray(unary, dtype=np.float64)
     n_s = unary.shape[0]
     ptr, directed = incoming_edges(edges, n_s)
 
-    def sweep(read: np.ndarray, write: np.ndarray, order: np.ndarray) -> float:
+    def sweep(read: np.ndarray, write: np.ndarray, steps: Steps) -> float:
         change = 0.0
-        for s in order:
+        for k, s in enumerate(steps.node):
             incoming = directed[ptr[s] : ptr[s + 1]]
-            for back in incoming:
-                out = back ^ 1
+            for out in steps.out[steps.ptr[k] : steps.ptr[k + 1]]:
                 h = unary[s].copy()
                 for other in incoming:
-                    if other != back:
+                    if other != out ^ 1:
                         h *= read[other]
                 psi = pairwise_dense(float(edge_length[out >> 1]), target_dist, lam, rho)
                 msg = psi.T @ h
@@ -363,4 +607,4 @@ def belief_propagation_dense(
                 write[out] = new
         return change
 
-    return _run(unary, edges, schedule, iterations, tol, seed, np.float64, sweep, None)
+    return _run(unary, edges, schedule, iterations, tol, seed, np.float64, sweep, None, started)
