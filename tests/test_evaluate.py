@@ -50,3 +50,78 @@ def test_symmetry_map_errors(tmp_path, text, n, match):
     with pytest.raises(InputError, match=match) as err:
         load_symmetry_map(path, n)
     assert "bad.sym" in str(err.value) and "\n" not in str(err.value)
+
+
+# --------------------------------------------------------------------------- map scores
+
+import scipy.sparse as sp  # noqa: E402
+
+from intrinsym import mesh as _mesh  # noqa: E402
+from intrinsym.evaluate import (  # noqa: E402
+    correspondence_curve,
+    load_labels,
+    map_errors,
+    plot_curve,
+    score_map,
+    segmentation_scores,
+)
+
+
+def path_graph(n=5, step=0.1):
+    """Vertices 0..n-1 on a line, step apart: geodesic d(i, j) = step |i - j|."""
+    i = np.arange(n - 1)
+    g = sp.coo_matrix((np.full(n - 1, step), (i, i + 1)), shape=(n, n))
+    return (g + g.T).tocsr()
+
+
+def test_map_errors_and_curve_by_hand():
+    g = path_graph()
+    truth = np.array([4, 3, 2, 1, 0])
+    err = map_errors(np.array([3, 3, -1, 0, 0]), truth, g)
+    assert np.allclose(err[[0, 1, 3, 4]], [0.1, 0.0, 0.1, 0.0]) and np.isinf(err[2])
+    # thresholds 0, 0.05, 0.1: two exact, none more within 0.05, two more within 0.1
+    assert correspondence_curve(err, np.array([0.0, 0.05, 0.1 + 1e-12])).tolist() == [0.4, 0.4, 0.8]
+
+
+def test_segmentation_score_by_hand():
+    labels = np.array([1, 1, 0, 2, 2])
+    truth = np.array([4, 3, 2, 1, 0])  # part 1 <-> part 2
+    predicted = np.array([4, 2, -1, 1, 0])
+    # part 1: R = {v : pred(v) in part 2} = {0}, G = {0, 1}: 1/2
+    # part 2: R = {3, 4} = G: 1
+    assert segmentation_scores(predicted, truth, labels) == {1: 0.5, 2: 1.0}
+    # a map that sends all five vertices into part 2: R & G = {0, 1}, R | G = all five
+    assert segmentation_scores(np.array([3, 4, 3, 4, 3]), truth, labels)[1] == 0.4
+
+
+def test_score_map_on_the_mirror_shape(mirror, tmp_path):
+    v, f, sym = mirror
+    shape = _mesh.from_arrays(v, f)
+    sides = (v[:, 0] > 0.2).astype(int) + 2 * (v[:, 0] < -0.2)
+    assert segmentation_scores(sym, sym, sides) == {1: 1.0, 2: 1.0}
+    # the true map on every 10th vertex (one Dijkstra per distinct predicted vertex)
+    exact = score_map(np.where(np.arange(len(v)) % 10 == 0, sym, -1), shape, sym, labels=sides)
+    assert exact.fraction[0] == pytest.approx(exact.coverage) and exact.mean_error == 0.0
+    assert exact.coverage == pytest.approx(0.1, abs=0.01)
+    assert set(exact.segmentation) == {1, 2}
+    # the identity is right only on the mirror plane; 9 in 10 vertices have no prediction
+    some = np.where(np.arange(len(v)) % 10 == 0, np.arange(len(v)), -1)
+    s = score_map(some, shape, sym)
+    assert s.coverage == pytest.approx(0.1, abs=0.01)
+    assert s.within(0.25) <= 0.1 and s.within(0.0) < 0.02
+    assert s.mean_error > 0.1
+    report = s.as_dict()
+    assert set(report) >= {"within_0.05", "within_0.10", "mean_error", "curve"}
+    plot_curve(s, tmp_path / "curve.png")
+    assert (tmp_path / "curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_labels_and_missing_entries(tmp_path):
+    (tmp_path / "l.txt").write_text("0\n1\n2\n")
+    assert load_labels(tmp_path / "l.txt", 3).tolist() == [0, 1, 2]
+    with pytest.raises(InputError, match="3 labels"):
+        load_labels(tmp_path / "l.txt", 4)
+    np.save(tmp_path / "m.npy", np.array([1, -1, 0]))
+    assert load_symmetry_map(tmp_path / "m.npy", 3, allow_missing=True).tolist() == [1, -1, 0]
+    with pytest.raises(InputError, match="out of range"):
+        load_symmetry_map(tmp_path / "m.npy", 3)

@@ -10,13 +10,23 @@ symmetry plane has nothing to find).
 * decoy recall: the same test around a random vertex farther than ``2 near`` from both
   s and g (chance level: a flat marginal passes peak and decoy recall alike);
 * breadth: the mean fraction of targets whose marginal reaches half the row maximum.
+
+Scores of an extracted symmetry map (one image per input vertex):
+
+* correspondence curve: the fraction of vertices whose predicted image lies within
+  t of the true one, for t in [0, 0.25] (vertices without a prediction never do), and
+  the mean error over the vertices with a prediction;
+* segmentation score (the paper's Sec. 6: "the percentage of points that have been
+  correctly classified. Incorrect points are either those outside the manual
+  segmentation or the missing"): for a labelled part G whose true symmetric part is G',
+  the region R the predicted map sends into G' scores |R & G| / |R | G|.
 """
 
 from __future__ import annotations
 
 import json
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -39,11 +49,13 @@ class MarginalScores:
         return asdict(self)
 
 
-def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None) -> np.ndarray:
+def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None, allow_missing: bool = False) -> np.ndarray:
     """Read a symmetry map as a 0-based (N,) int64 array.
 
     Formats: TOSCA ``.sym`` (one 1-based index per line), KIDS ``sym.txt`` (1-based
-    indices in ``%e`` notation, any whitespace) and ``.npy`` (0-based integers).
+    indices in ``%e`` notation, any whitespace) and ``.npy`` (0-based integers). With
+    ``allow_missing``, -1 (0 in the 1-based formats) marks a vertex without an image,
+    as in ``symmetry_map.npy``.
 
     Raises
     ------
@@ -66,7 +78,7 @@ def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None) ->
     sym = values.astype(np.int64) - base
     if n_vertices is not None and len(sym) != n_vertices:
         raise mesh.InputError(f"{path}: symmetry map has {len(sym)} entries, the mesh {n_vertices} vertices")
-    if sym.min() < 0 or sym.max() >= len(sym):
+    if sym.min() < (-1 if allow_missing else 0) or sym.max() >= len(sym):
         raise mesh.InputError(f"{path}: symmetry map index out of range")
     return sym
 
@@ -155,6 +167,198 @@ def score_marginals(
     return marginal_scores(marginals, d_s[:, tgt], d_g[:, tgt], d_d, source_mirror, near, peak)
 
 
-def save_scores(scores: MarginalScores, path: str | os.PathLike) -> None:
-    """Write the scores as JSON (atomically)."""
-    atomic_write(path, lambda f: json.dump(scores.as_dict(), f, indent=2))
+def save_scores(scores: MarginalScores | dict, path: str | os.PathLike) -> None:
+    """Write the scores (or a report dict of them) as JSON (atomically)."""
+    report = scores if isinstance(scores, dict) else scores.as_dict()
+    atomic_write(path, lambda f: json.dump(report, f, indent=2))
+
+
+@dataclass(frozen=True)
+class MapScores:
+    """How close a per-vertex symmetry map comes to the true one (geodesic, sqrt(area)).
+
+    Attributes
+    ----------
+    thresholds : (K,) float64
+        Error thresholds t.
+    fraction : (K,) float64
+        Fraction of all vertices whose predicted image lies within t of the true one.
+    mean_error : float
+        Mean error over the vertices with a prediction (nan when there is none).
+    coverage : float
+        Fraction of vertices with a prediction.
+    n_vertices : int
+    segmentation : dict
+        Part label -> segmentation score in [0, 1] (empty without labels).
+    """
+
+    thresholds: np.ndarray
+    fraction: np.ndarray
+    mean_error: float
+    coverage: float
+    n_vertices: int
+    segmentation: dict = field(default_factory=dict)
+
+    def within(self, t: float) -> float:
+        """Fraction of vertices within ``t`` (the curve at its nearest threshold <= t)."""
+        return float(self.fraction[np.searchsorted(self.thresholds, t + 1e-12) - 1])
+
+    def as_dict(self) -> dict:
+        return {
+            "within_0.05": self.within(0.05),
+            "within_0.10": self.within(0.10),
+            "mean_error": self.mean_error,
+            "coverage": self.coverage,
+            "n_vertices": self.n_vertices,
+            "curve": {"thresholds": self.thresholds.tolist(), "fraction": self.fraction.tolist()},
+            "segmentation": {str(k): v for k, v in self.segmentation.items()},
+        }
+
+
+def load_labels(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
+    """Read per-vertex part labels as (N,) int64: ``.npy`` or one integer per line/token.
+
+    Label 0 (or negative) marks vertices outside every part.
+
+    Raises
+    ------
+    mesh.InputError
+        On unreadable files, non-integers or a wrong length.
+    """
+    p = Path(path)
+    try:
+        values = np.load(p, allow_pickle=False).ravel() if p.suffix.lower() == ".npy" else np.array(
+            p.read_text().split(), dtype=np.float64)
+    except (OSError, ValueError) as err:
+        raise mesh.InputError(f"{path}: cannot read labels ({err})") from None
+    if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
+        raise mesh.InputError(f"{path}: labels hold non-integer entries")
+    if len(values) != n_vertices:
+        raise mesh.InputError(f"{path}: {len(values)} labels, the mesh has {n_vertices} vertices")
+    return values.astype(np.int64)
+
+
+def map_errors(predicted: np.ndarray, truth: np.ndarray, graph, chunk: int = 256) -> np.ndarray:
+    """Geodesic distance between predicted and true image of every vertex.
+
+    Parameters
+    ----------
+    predicted : (N,) int
+        Predicted image vertex, -1 for none.
+    truth : (N,) int
+        True image vertex.
+    graph : (N, N) sparse
+        Geodesic graph (:func:`geodesics.surface_graph`) of the shape, in sqrt(area) units.
+    chunk : int
+        Distinct predicted vertices per Dijkstra batch.
+
+    Returns
+    -------
+    (N,) float64
+        Errors; inf where there is no prediction or the two are not connected.
+    """
+    pred = np.asarray(predicted, dtype=np.int64)
+    true = np.asarray(truth, dtype=np.int64)
+    err = np.full(len(pred), np.inf)
+    has = np.flatnonzero(pred >= 0)
+    # a map extended from samples takes few distinct values: one Dijkstra per value
+    sources, inverse = np.unique(pred[has], return_inverse=True)
+    for lo in range(0, len(sources), chunk):
+        rows = geodesics.distances_from(graph, sources[lo : lo + chunk])
+        pick = (inverse >= lo) & (inverse < lo + chunk)
+        err[has[pick]] = rows[inverse[pick] - lo, true[has[pick]]]
+    return err
+
+
+def correspondence_curve(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
+    """(K,) fraction of the errors (N,) at most each threshold (K,)."""
+    e = np.sort(np.asarray(errors, dtype=np.float64))
+    return np.searchsorted(e, np.asarray(thresholds, dtype=np.float64), side="right") / max(len(e), 1)
+
+
+def segmentation_scores(predicted: np.ndarray, truth: np.ndarray, labels: np.ndarray) -> dict[int, float]:
+    """The paper's segmentation score of every labelled part under a predicted map.
+
+    Parameters
+    ----------
+    predicted : (N,) int
+        Predicted image of every vertex, -1 for none.
+    truth : (N,) int
+        True image of every vertex; the symmetric part of part k is the label most of
+        its true images carry.
+    labels : (N,) int
+        Part label of every vertex; <= 0 outside all parts.
+
+    Returns
+    -------
+    dict
+        Label k -> |R & G| / |R | G| with G the part and R the vertices whose predicted
+        image lies in G's symmetric part.
+    """
+    lab = np.asarray(labels)
+    pred = np.asarray(predicted)
+    image_label = np.where(pred >= 0, lab[np.maximum(pred, 0)], 0)
+    out = {}
+    for k in np.unique(lab[lab > 0]):
+        part = lab == k
+        partner = np.bincount(lab[np.asarray(truth)[part]].clip(0)).argmax()
+        region = (image_label == partner) & (pred >= 0)
+        out[int(k)] = float((region & part).sum() / (region | part).sum())
+    return out
+
+
+def score_map(
+    predicted: np.ndarray,
+    shape: mesh.Shape,
+    sym: np.ndarray,
+    thresholds: np.ndarray = np.linspace(0.0, 0.25, 51),
+    labels: np.ndarray | None = None,
+) -> MapScores:
+    """Score a per-vertex symmetry map on the input mesh (normalised to unit area here).
+
+    Parameters
+    ----------
+    predicted : (N,) int
+        Predicted image of every input vertex, -1 for none.
+    shape : mesh.Shape
+        The input mesh as loaded.
+    sym : (N,) int
+        True image of every input vertex.
+    thresholds : (K,) float
+        In units of sqrt(surface area).
+    labels : (N,) int, optional
+        Part labels for :func:`segmentation_scores`.
+    """
+    cleaned, vmap = mesh.clean(shape)
+    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(mesh.surface_area(cleaned)), cleaned.faces)
+    pred = np.asarray(predicted, dtype=np.int64)
+    err = map_errors(np.where(pred >= 0, vmap[np.maximum(pred, 0)], -1), vmap[np.asarray(sym)], graph)
+    has = pred >= 0
+    return MapScores(
+        thresholds=np.asarray(thresholds, dtype=np.float64),
+        fraction=correspondence_curve(err, thresholds),
+        mean_error=float(np.mean(err[has])) if has.any() else float("nan"),
+        coverage=float(np.mean(has)),
+        n_vertices=len(pred),
+        segmentation={} if labels is None else segmentation_scores(pred, sym, labels),
+    )
+
+
+def plot_curve(scores: MapScores, path: str | os.PathLike, title: str = "") -> None:
+    """Write the correspondence curve as a PNG (atomically)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4.5, 3.5), dpi=120)
+    ax.plot(scores.thresholds, scores.fraction, lw=2)
+    ax.set_xlabel("geodesic error / sqrt(area)")
+    ax.set_ylabel("fraction of vertices")
+    ax.set_xlim(scores.thresholds[0], scores.thresholds[-1])
+    ax.set_ylim(0, 1.01)
+    ax.grid(alpha=0.3)
+    ax.set_title(title or f"mean error {scores.mean_error:.3f}, within 0.10: {scores.within(0.10):.2f}")
+    fig.tight_layout()
+    atomic_write(path, lambda f: fig.savefig(f, format="png"), binary=True)
+    plt.close(fig)

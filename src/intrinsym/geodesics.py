@@ -30,6 +30,7 @@ __all__ = [
     "pair_distances",
     "surface_graph",
     "voronoi_adjacency",
+    "voronoi_cells",
 ]
 
 
@@ -786,6 +787,33 @@ def pair_distances(graph: sp.spmatrix, pairs: np.ndarray, limit: float = np.inf)
     return out
 
 
+def voronoi_cells(graph: sp.spmatrix, seeds: np.ndarray) -> np.ndarray:
+    """Geodesic Voronoi partition: the nearest seed of every vertex (multi-source Dijkstra).
+
+    Parameters
+    ----------
+    graph : (N, N) sparse, symmetric
+        Edge lengths, e.g. from :func:`surface_graph`.
+    seeds : (s,) int array
+        Distinct seed vertices.
+
+    Returns
+    -------
+    (N,) int64
+        Index into ``seeds`` of the nearest seed, -1 for vertices no seed reaches.
+    """
+    g = sp.csr_matrix(graph)
+    s = np.asarray(seeds, dtype=np.int64).ravel()
+    if len(np.unique(s)) != len(s):
+        raise ValueError("seeds must be distinct vertices")
+    if len(s) == 0:
+        return np.full(g.shape[0], -1, dtype=np.int64)
+    _, _, owner_vertex = dijkstra(g, directed=True, indices=s, min_only=True, return_predecessors=True)
+    seed_index = np.full(g.shape[0], -1, dtype=np.int64)
+    seed_index[s] = np.arange(len(s))
+    return np.where(owner_vertex >= 0, seed_index[np.maximum(owner_vertex, 0)], -1)
+
+
 def voronoi_adjacency(
     graph: sp.spmatrix, seeds: np.ndarray, edges: np.ndarray | None = None
 ) -> np.ndarray:
@@ -814,15 +842,9 @@ def voronoi_adjacency(
         lexicographically.
     """
     g = sp.csr_matrix(graph)
-    s = np.asarray(seeds, dtype=np.int64).ravel()
-    if len(np.unique(s)) != len(s):
-        raise ValueError("seeds must be distinct vertices")
-    if len(s) == 0:
+    if len(np.asarray(seeds).ravel()) == 0:
         return np.zeros((0, 2), dtype=np.int64)
-    _, _, owner_vertex = dijkstra(g, directed=True, indices=s, min_only=True, return_predecessors=True)
-    seed_index = np.full(g.shape[0], -1, dtype=np.int64)
-    seed_index[s] = np.arange(len(s))
-    owner = np.where(owner_vertex >= 0, seed_index[np.maximum(owner_vertex, 0)], -1)
+    owner = voronoi_cells(g, seeds)
     if edges is None:
         coo = sp.triu(g, k=1).tocoo()
         e = np.stack([coo.row, coo.col], axis=1).astype(np.int64)

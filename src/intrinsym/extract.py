@@ -1,0 +1,707 @@
+"""Symmetries from marginals: peak tracking and region growing (paper Sec. 5.1), then more.
+
+For one source sample s, :func:`query` thresholds its max-normalised marginal at ``t``,
+takes the distinct peaks as seeds, and grows each seed over the source graph: a
+neighbour n of a mapped sample m joins, mapped to target t', when t' is a peak of n
+(normalised marginal >= t) and ``|d_T(f(m), t') - d_S(m, n)| < d_error``. Every grown
+seed is a symmetric part pair (source region -> target region, with the point map).
+
+Beyond the paper, :func:`extract` grows from every source sample and every peak, merges
+parts that describe the same map, separates the identity (self-matching only), ranks
+the symmetries and picks the dominant global one; :func:`vertex_map` extends a symmetry
+to every input vertex through the geodesic Voronoi cells of the source samples.
+
+Only the geodesics BP already needed are used: the source-graph edge lengths and the
+sparse, distance-sorted target-target distances (:class:`~intrinsym.geodesics.SparseDistances`,
+radius R). A target pair farther apart than R counts as incompatible, so ``d_error``
+acts at most up to ``R - d_S(m, n)``. All lengths are in units of sqrt(surface area).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from scipy.spatial import cKDTree
+
+from .geodesics import SparseDistances
+
+
+@dataclass(frozen=True)
+class ExtractParams:
+    """Parameters of the extraction. Lengths in units of sqrt(surface area).
+
+    Attributes
+    ----------
+    threshold : float
+        Peak threshold t on the max-normalised marginal (paper: t in [0.5, 0.75]).
+    d_error : float
+        Geodesic error bound of the region growing (paper: d_error in [0.001, 0.15]).
+        The default is about two target spacings at the default |Pt| = 4000.
+    peak_radius : float
+        Distinct peaks of one marginal are at least this far apart (non-maximum
+        suppression); also the tolerance within which two maps agree on a point.
+    identity_radius : float
+        A correspondence is trivial when its target lies within this distance of the
+        source point itself (self-matching only); a map seeded at a trivial
+        correspondence is the identity, any other map never takes trivial ones.
+    global_fraction : float
+        The dominant non-identity symmetry is "global" when it covers at least this
+        fraction of the source samples.
+    seeds_per_sample : int
+        :func:`extract` seeds region growings from at most this many (the strongest)
+        peaks of each source sample.
+    min_fraction : float
+        Smallest symmetry that :func:`extract` reports, as a fraction of |Ps| (at least
+        one sample).
+    max_count : int
+        At most this many symmetries are reported (the best ranked).
+    keep_identity : bool
+        Report identity symmetries too.
+    """
+
+    threshold: float = 0.5
+    d_error: float = 0.03
+    peak_radius: float = 0.05
+    identity_radius: float = 0.05
+    global_fraction: float = 0.5
+    seeds_per_sample: int = 6
+    min_fraction: float = 0.05
+    max_count: int = 32
+    keep_identity: bool = False
+
+    def __post_init__(self) -> None:
+        checks = [
+            (not 0 < self.threshold <= 1, "threshold must lie in (0, 1]"),
+            (self.d_error <= 0, "d_error must be positive"),
+            (self.peak_radius < 0, "peak_radius must be non-negative"),
+            (self.identity_radius < 0, "identity_radius must be non-negative"),
+            (not 0 < self.global_fraction <= 1, "global_fraction must lie in (0, 1]"),
+            (not 0 <= self.min_fraction <= 1, "min_fraction must lie in [0, 1]"),
+            (self.max_count < 1, "max_count must be at least 1"),
+            (self.seeds_per_sample < 1, "seeds_per_sample must be at least 1"),
+        ]
+        for bad, message in checks:
+            if bad:
+                raise ValueError(message)
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """A symmetric part pair: source samples and their images.
+
+    Attributes
+    ----------
+    source : (k,) int64
+        Source sample indices, ascending.
+    target : (k,) int64
+        Target sample index of the image of each ``source`` entry.
+    score : float
+        In [0, 1]: the sum over the pairs of the max-normalised marginal, divided by
+        |Ps|, times ``consistency``; 1 = the whole shape, each point at its marginal's
+        maximum, every edge geodesically consistent.
+    consistency : float
+        Fraction of source edges inside the part whose images keep their length within
+        ``d_error`` (1.0 for a part without internal edges).
+    kind : {"identity", "partial", "global"}
+    """
+
+    source: np.ndarray
+    target: np.ndarray
+    score: float
+    consistency: float
+    kind: str
+
+    def image(self, n_source: int) -> np.ndarray:
+        """(n_source,) int64: target sample of every source sample, -1 outside the part."""
+        out = np.full(n_source, -1, dtype=np.int64)
+        out[self.source] = self.target
+        return out
+
+
+@dataclass(frozen=True)
+class Extraction:
+    """All symmetries of a result, ranked, and the dominant global one.
+
+    Attributes
+    ----------
+    symmetries : list of Symmetry
+        Ranked by score, best first (identity included only when asked).
+    global_index : int
+        Index into ``symmetries`` of the global symmetry, -1 when there is none.
+    params : ExtractParams
+    """
+
+    symmetries: list[Symmetry]
+    global_index: int
+    params: ExtractParams
+
+
+@dataclass(frozen=True)
+class SourceGraph:
+    """CSR adjacency of the undirected source graph with geodesic edge lengths.
+
+    Attributes
+    ----------
+    ptr : (S+1,) int64
+    neighbour : (2E,) int64
+    length : (2E,) float64
+    """
+
+    ptr: np.ndarray
+    neighbour: np.ndarray
+    length: np.ndarray
+
+    @classmethod
+    def from_edges(cls, edges: np.ndarray, edge_length: np.ndarray, n_source: int) -> SourceGraph:
+        """Build from (E, 2) edges into the source samples and their (E,) lengths."""
+        e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        a = np.concatenate([e[:, 0], e[:, 1]])
+        b = np.concatenate([e[:, 1], e[:, 0]])
+        w = np.concatenate([edge_length, edge_length]).astype(np.float64)
+        order = np.lexsort((b, a))
+        ptr = np.zeros(n_source + 1, dtype=np.int64)
+        np.cumsum(np.bincount(a, minlength=n_source), out=ptr[1:])
+        return cls(ptr, b[order], w[order])
+
+
+@dataclass(frozen=True)
+class Support:
+    """What extraction needs beside the marginals, all computed before or for BP.
+
+    Attributes
+    ----------
+    edge_length : (E,) float64
+        Geodesic length of every source-graph edge.
+    targets : SparseDistances
+        Target-target geodesics up to ``targets.radius``, rows sorted by distance.
+    vertex_source : (N_a,) int64
+        Source sample whose geodesic Voronoi cell holds each input vertex of the source
+        shape (-1 where none).
+    vertex_target : (N_b,) int64
+        The same for the target samples on the target shape.
+    self_match : bool
+        Source and target are one shape (enables the identity kind).
+    """
+
+    edge_length: np.ndarray
+    targets: SparseDistances
+    vertex_source: np.ndarray
+    vertex_target: np.ndarray
+    self_match: bool
+
+    KEYS = ("edge_length", "vertex_source", "vertex_target", "target_distance_indptr",
+            "target_distance_index", "target_distance", "target_distance_radius", "self_match")
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Arrays to store (under :attr:`KEYS`) beside a result's own arrays."""
+        t = self.targets
+        return {
+            "edge_length": np.asarray(self.edge_length, dtype=np.float64),
+            "vertex_source": np.asarray(self.vertex_source, dtype=np.int64),
+            "vertex_target": np.asarray(self.vertex_target, dtype=np.int64),
+            "target_distance_indptr": t.indptr.astype(np.int64),
+            "target_distance_index": t.indices.astype(np.int32),
+            "target_distance": t.dist.astype(np.float64),
+            "target_distance_radius": np.float64(t.radius),
+            "self_match": np.bool_(self.self_match),
+        }
+
+    @classmethod
+    def from_arrays(cls, z: dict) -> Support:
+        """Inverse of :meth:`to_arrays`."""
+        targets = SparseDistances(z["target_distance_indptr"].astype(np.int64),
+                                  z["target_distance_index"].astype(np.int64),
+                                  z["target_distance"].astype(np.float64), float(z["target_distance_radius"]))
+        return cls(z["edge_length"], targets, z["vertex_source"], z["vertex_target"], bool(z["self_match"]))
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@nb.njit(cache=True)
+def _find(t_ptr, t_idx, t_dist, a, b, limit):
+    """d_T(a, b) when b lies in row a within ``limit``, else inf."""
+    lo = t_ptr[a]
+    hi = lo + np.searchsorted(t_dist[lo : t_ptr[a + 1]], limit, "right")
+    for k in range(lo, hi):
+        if t_idx[k] == b:
+            return t_dist[k]
+    return np.inf
+
+
+@nb.njit(cache=True)
+def _peaks(row, t_ptr, t_idx, t_dist, threshold, radius):
+    """Distinct peaks of one max-normalised marginal row, strongest first.
+
+    Greedy non-maximum suppression: the strongest remaining target >= threshold is a
+    peak and suppresses every target within ``radius`` of it.
+    """
+    cand = np.flatnonzero(row >= threshold)
+    cand = cand[np.argsort(-row[cand], kind="mergesort")]
+    gone = np.zeros(len(row), dtype=np.bool_)
+    out = np.empty(len(cand), dtype=np.int64)
+    k = 0
+    for t in cand:
+        if gone[t]:
+            continue
+        out[k] = t
+        k += 1
+        lo = t_ptr[t]
+        hi = lo + np.searchsorted(t_dist[lo : t_ptr[t + 1]], radius, "right")
+        for j in range(lo, hi):
+            gone[t_idx[j]] = True
+    return out[:k]
+
+
+@nb.njit(cache=True)
+def _support(image, n, candidate, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error):
+    """How many mapped neighbours k of n keep |d_T(f(k), candidate) - d_S(k, n)| < d_error."""
+    count = 0
+    for e in range(g_ptr[n], g_ptr[n + 1]):
+        k = g_nbr[e]
+        if image[k] >= 0:
+            d = _find(t_ptr, t_idx, t_dist, image[k], candidate, g_len[e] + d_error)
+            count += abs(d - g_len[e]) < d_error
+    return count
+
+
+@nb.njit(cache=True)
+def _grow(norm, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, threshold, d_error, min_support,
+          self_target, identity_radius, side, image):
+    """Region growing of Sec. 5.1 (breadth first) from the samples already in ``image``.
+
+    ``image`` (S,) holds the map so far (-1 = unmapped) and is extended in place. A
+    neighbour n of a mapped m may take any target t' >= threshold with
+    |d_T(f(m), t') - d_S(m, n)| < d_error (a contiguous slice of the sorted row of f(m)).
+    Among those it takes the one that agrees with most of its mapped neighbours, then
+    the largest marginal, if at least ``min_support`` of them agree. ``side`` 1 (0)
+    allows only targets within (outside) ``identity_radius`` of n itself, the target
+    ``self_target[n]``; -1 allows all. Returns the map's size.
+    """
+    cand = np.empty(norm.shape[1], dtype=np.int64)
+    queue = np.flatnonzero(image >= 0)
+    tail = len(queue)
+    queue = np.concatenate((queue, np.empty(len(image) - tail, dtype=np.int64)))
+    head = 0
+    while head < tail:
+        m = queue[head]
+        head += 1
+        row_lo, row_hi = t_ptr[image[m]], t_ptr[image[m] + 1]
+        ring = t_dist[row_lo:row_hi]
+        for e in range(g_ptr[m], g_ptr[m + 1]):
+            n = g_nbr[e]
+            if image[n] >= 0:
+                continue
+            lo = row_lo + np.searchsorted(ring, g_len[e] - d_error, "right")
+            hi = row_lo + np.searchsorted(ring, g_len[e] + d_error, "left")
+            n_cand = 0
+            for k in range(lo, hi):
+                if norm[n, t_idx[k]] < threshold:
+                    continue
+                if side >= 0:
+                    near = _find(t_ptr, t_idx, t_dist, self_target[n], t_idx[k], identity_radius) <= identity_radius
+                    if near != (side == 1):
+                        continue
+                cand[n_cand] = t_idx[k]
+                n_cand += 1
+            best, best_support, best_value = -1, -1, threshold
+            for c in range(n_cand):
+                value = norm[n, cand[c]]
+                # support >= 1 (the parent) always; it only ranks several candidates
+                support = 1 if n_cand == 1 and min_support == 1 else _support(
+                    image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error)
+                if support < min_support:
+                    continue
+                if support > best_support or (support == best_support and value >= best_value):
+                    best, best_support, best_value = cand[c], support, value
+            if best >= 0:
+                image[n] = best
+                queue[tail] = n
+                tail += 1
+    return tail
+
+
+@nb.njit(cache=True)
+def _edge_agreement(a, b, internal, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, same_tol):
+    """(agreeing, disagreeing) counts between maps a and b, both (S,) with -1 = unmapped.
+
+    A sample mapped by both agrees when its two images lie within ``same_tol``; an edge
+    (u, v) with u mapped only by a and v only by b agrees when the images keep the edge
+    length within ``d_error``. With ``internal`` (and a = b) it counts the edges inside
+    one map instead: its consistency.
+    """
+    good, bad = 0, 0
+    for u in range(len(a)):
+        if a[u] < 0:
+            continue
+        if b[u] >= 0 and not internal:
+            if _find(t_ptr, t_idx, t_dist, a[u], b[u], same_tol) <= same_tol:
+                good += 1
+            else:
+                bad += 1
+            continue
+        for e in range(g_ptr[u], g_ptr[u + 1]):
+            v = g_nbr[e]
+            if b[v] < 0 or (not internal and a[v] >= 0) or (internal and v < u):
+                continue
+            d = _find(t_ptr, t_idx, t_dist, a[u], b[v], g_len[e] + d_error)
+            if abs(d - g_len[e]) < d_error:
+                good += 1
+            else:
+                bad += 1
+    return good, bad
+
+
+@nb.njit(cache=True)
+def _dilate(mask, centres, t_ptr, t_idx, t_dist, radius):
+    """mask[t] = True for every target t within ``radius`` of a centre (-1 skipped)."""
+    for c in centres:
+        if c < 0:
+            continue
+        lo = t_ptr[c]
+        hi = lo + np.searchsorted(t_dist[lo : t_ptr[c + 1]], radius, "right")
+        for k in range(lo, hi):
+            mask[t_idx[k]] = True
+
+
+@nb.njit(cache=True)
+def _mark_covered(covered, image, t_ptr, t_idx, t_dist, radius):
+    """covered[s, t] = True for every t within ``radius`` of image[s]."""
+    for s in range(len(image)):
+        _dilate(covered[s], image[s : s + 1], t_ptr, t_idx, t_dist, radius)
+
+
+# --------------------------------------------------------------------------- public
+
+
+def normalise_rows(marginals: np.ndarray) -> np.ndarray:
+    """(S, T) float32 marginals divided by their row maxima (rows of zeros stay zero)."""
+    m = np.asarray(marginals, dtype=np.float32)
+    top = m.max(axis=1, keepdims=True)
+    return np.divide(m, top, out=np.zeros_like(m), where=top > 0)
+
+
+def nearest_targets(source_points: np.ndarray, target_points: np.ndarray) -> np.ndarray:
+    """(S,) int64: the target sample nearest each source sample (self-matching).
+
+    Euclidean nearest is exact enough here: the two lie about a target spacing apart.
+    """
+    return cKDTree(target_points).query(source_points)[1].astype(np.int64)
+
+
+def peaks(row: np.ndarray, targets: SparseDistances, threshold: float, radius: float) -> np.ndarray:
+    """Distinct peaks of a marginal row, strongest first.
+
+    Parameters
+    ----------
+    row : (T,) array
+        A marginal (any positive scale; normalised to its maximum here).
+    targets : SparseDistances
+    threshold : float
+        Fraction of the row maximum a peak must reach (paper: t in [0.5, 0.75]).
+    radius : float
+        Peaks are farther apart than this (capped at ``targets.radius``).
+
+    Returns
+    -------
+    (k,) int64 target indices.
+    """
+    r = np.asarray(row, dtype=np.float32)
+    r = r / r.max() if r.max() > 0 else r
+    return _peaks(r, targets.indptr, targets.indices, targets.dist, threshold, radius)
+
+
+def grow(
+    norm: np.ndarray,
+    graph: SourceGraph,
+    targets: SparseDistances,
+    seed_source: int,
+    seed_target: int,
+    params: ExtractParams = ExtractParams(),
+    self_target: np.ndarray | None = None,
+) -> np.ndarray:
+    """Region growing of the paper's Sec. 5.1 from one correspondence.
+
+    Parameters
+    ----------
+    norm : (S, T) float32
+        Max-normalised marginals (:func:`normalise_rows`).
+    graph : SourceGraph
+    targets : SparseDistances
+    seed_source, seed_target : int
+        The seed pair (a source sample and one of its peaks).
+    params : ExtractParams
+        Uses the peak threshold t, d_error and identity_radius.
+    self_target : (S,) int64, optional
+        The target sample at each source sample's own position (self-matching). The
+        map then stays on its seed's side of the identity (:func:`is_identity`): on a
+        mirror plane identity and mirror coincide, and without this rule the growing
+        crosses over to the identity, which the marginals support everywhere.
+
+    Returns
+    -------
+    (S,) int64
+        Image of every source sample under the grown map, -1 outside the region.
+    """
+    image = np.full(norm.shape[0], -1, dtype=np.int64)
+    image[seed_source] = seed_target
+    side = -1 if self_target is None else int(is_identity(seed_source, seed_target, targets, self_target,
+                                                           params.identity_radius))
+    own = np.full(len(image), -1, dtype=np.int64) if self_target is None else np.asarray(self_target, dtype=np.int64)
+    _grow(norm, graph.ptr, graph.neighbour, graph.length, targets.indptr, targets.indices, targets.dist,
+          np.float32(params.threshold), params.d_error, 1, own, params.identity_radius, side, image)
+    return image
+
+
+def complete(
+    norm: np.ndarray, graph: SourceGraph, targets: SparseDistances, image: np.ndarray, params: ExtractParams
+) -> np.ndarray:
+    """Extend a map to the samples its growing could not reach.
+
+    Below the peak threshold and across the identity band (where a mirror maps points
+    near themselves), geometry alone decides: an unmapped sample takes the target that
+    keeps the geodesic lengths to at least two of its mapped neighbours within
+    ``d_error`` (the most such neighbours, then the largest marginal).
+
+    Returns
+    -------
+    (S,) int64, a completed copy of ``image``.
+    """
+    out = np.array(image, dtype=np.int64)
+    unused = np.full(len(out), -1, dtype=np.int64)
+    _grow(norm, graph.ptr, graph.neighbour, graph.length, targets.indptr, targets.indices, targets.dist,
+          np.float32(0.0), params.d_error, 2, unused, params.identity_radius, -1, out)
+    return out
+
+
+def is_identity(
+    source: int, target: int, targets: SparseDistances, self_target: np.ndarray | None, radius: float
+) -> bool:
+    """Whether the correspondence source -> target is trivial: the target lies within
+    ``radius`` of the source sample itself (always False without ``self_target``)."""
+    if self_target is None:
+        return False
+    return _find(targets.indptr, targets.indices, targets.dist, self_target[source], target, radius) <= radius
+
+
+def _make(image: np.ndarray, norm: np.ndarray, graph: SourceGraph, targets: SparseDistances,
+          p: ExtractParams, kind: str) -> Symmetry:
+    """A Symmetry with its score and consistency from a map (S,) int64."""
+    src = np.flatnonzero(image >= 0)
+    tgt = image[src]
+    t = targets
+    good, bad = _edge_agreement(image, image, True, graph.ptr, graph.neighbour, graph.length,
+                                t.indptr, t.indices, t.dist, p.d_error, p.peak_radius)
+    consistency = good / (good + bad) if good + bad else 1.0
+    score = float(norm[src, tgt].sum()) / norm.shape[0] * consistency
+    return Symmetry(src, tgt, score, consistency, kind)
+
+
+def query(
+    marginals: np.ndarray,
+    graph: SourceGraph,
+    targets: SparseDistances,
+    source: int,
+    params: ExtractParams = ExtractParams(),
+    self_target: np.ndarray | None = None,
+) -> list[Symmetry]:
+    """What is symmetric to one source sample: every part pair grown from its peaks.
+
+    Parameters
+    ----------
+    marginals : (S, T) array
+    graph : SourceGraph
+    targets : SparseDistances
+    source : int
+        The chosen source sample.
+    params : ExtractParams
+    self_target : (S,) int64, optional
+        The target sample at each source sample's own position (self-matching); enables
+        the "identity" kind.
+
+    Returns
+    -------
+    list of Symmetry
+        One per peak of the marginal, best score first; each contains ``source``.
+    """
+    norm = normalise_rows(marginals)
+    found = []
+    for t in peaks(norm[source], targets, params.threshold, params.peak_radius):
+        image = grow(norm, graph, targets, source, int(t), params, self_target)
+        kind = "identity" if is_identity(source, t, targets, self_target, params.identity_radius) else "partial"
+        found.append(_make(image, norm, graph, targets, params, kind))
+    return sorted(found, key=lambda s: -s.score)
+
+
+def _merge(
+    images: list[np.ndarray], graph: SourceGraph, targets: SparseDistances, p: ExtractParams
+) -> list[np.ndarray]:
+    """Greedy union of maps that describe the same map, largest first.
+
+    A map joins an earlier group when they agree (on shared samples and across the
+    edges between them) at least 80% of the time; the group keeps its own images where
+    both map a sample. Two different symmetries agree only near their common fixed
+    points; a lower bar lets noisy parts of other maps into the group (on TOSCA cat0 a
+    simple majority lowered the global map's share within 0.10 from 0.86 to 0.78).
+    """
+    t = targets
+    groups: list[np.ndarray] = []
+    for image in sorted(images, key=lambda im: -int((im >= 0).sum())):
+        for group in groups:
+            good, bad = _edge_agreement(group, image, False, graph.ptr, graph.neighbour, graph.length,
+                                        t.indptr, t.indices, t.dist, p.d_error, p.peak_radius)
+            if good and good >= 0.8 * (good + bad):
+                np.copyto(group, image, where=group < 0)
+                break
+        else:
+            groups.append(image.copy())
+    return groups
+
+
+def extract(
+    marginals: np.ndarray,
+    graph: SourceGraph,
+    targets: SparseDistances,
+    params: ExtractParams = ExtractParams(),
+    self_target: np.ndarray | None = None,
+) -> Extraction:
+    """Enumerate all symmetries: grow from every source sample and peak, merge, rank.
+
+    Seeds are taken strongest first; a seed (s, t) is skipped when an earlier part
+    already maps s within ``peak_radius`` of t. Parts smaller than ``min_fraction``
+    of |Ps| are dropped, the others merged into maps
+    (identity and non-identity parts separately, so that the two never fuse where they
+    coincide, e.g. on a mirror plane), and the best-ranked non-identity map covering
+    at least ``global_fraction`` of the source samples is the global one.
+
+    Parameters
+    ----------
+    marginals : (S, T) array
+    graph : SourceGraph
+    targets : SparseDistances
+    params : ExtractParams
+    self_target : (S,) int64, optional
+        See :func:`query`.
+
+    Returns
+    -------
+    Extraction
+    """
+    p = params
+    norm = normalise_rows(marginals)
+    n_s = norm.shape[0]
+    seeds = [(float(norm[s, t]), s, int(t)) for s in range(n_s)
+             for t in peaks(norm[s], targets, p.threshold, p.peak_radius)[: p.seeds_per_sample]]
+    seeds.sort(key=lambda x: (-x[0], x[1], x[2]))
+    covered = np.zeros(norm.shape, dtype=np.bool_)
+    parts: dict[str, list[np.ndarray]] = {"identity": [], "partial": []}
+    for _, s, t in seeds:
+        if covered[s, t]:
+            continue
+        image = grow(norm, graph, targets, s, t, p, self_target)
+        _mark_covered(covered, image, targets.indptr, targets.indices, targets.dist, p.peak_radius)
+        parts["identity" if is_identity(s, t, targets, self_target, p.identity_radius) else "partial"].append(image)
+    smallest = max(1.0, p.min_fraction * n_s)
+    symmetries = [
+        _make(image, norm, graph, targets, p, kind)
+        for kind in parts
+        if kind == "partial" or p.keep_identity
+        for image in _merge([im for im in parts[kind] if (im >= 0).sum() >= smallest], graph, targets, p)
+    ]
+    symmetries = sorted(symmetries, key=lambda s: -s.score)[: p.max_count]
+    wide = [i for i, sym in enumerate(symmetries) if sym.kind == "partial" and len(sym.source) >= p.global_fraction * n_s]
+    global_index = wide[0] if wide else -1
+    if global_index >= 0:
+        full = complete(norm, graph, targets, symmetries[global_index].image(n_s), p)
+        symmetries[global_index] = _make(full, norm, graph, targets, p, "global")
+    return Extraction(symmetries, global_index, p)
+
+
+def vertex_map(symmetry: Symmetry, vertex_source: np.ndarray, target_vertex: np.ndarray, n_source: int) -> np.ndarray:
+    """Extend a symmetry to every input vertex.
+
+    Each input vertex takes the image of the source sample whose geodesic Voronoi cell
+    holds it.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    vertex_source : (N,) int64
+        Source sample owning every input vertex (-1 where none).
+    target_vertex : (T,) int64
+        Input vertex (of the target shape) of every target sample.
+    n_source : int
+
+    Returns
+    -------
+    (N,) int64
+        Target input vertex of every input vertex, -1 where the symmetry says nothing.
+    """
+    image = np.append(symmetry.image(n_source), -1)
+    sample = image[np.where(vertex_source >= 0, vertex_source, n_source)]
+    return np.where(sample >= 0, np.asarray(target_vertex)[np.maximum(sample, 0)], -1).astype(np.int64)
+
+
+def from_result(
+    marginals: np.ndarray,
+    edges: np.ndarray,
+    support: Support,
+    source_points: np.ndarray,
+    target_points: np.ndarray,
+    params: ExtractParams = ExtractParams(),
+    source: int | None = None,
+) -> Extraction | list[Symmetry]:
+    """:func:`extract` (or :func:`query` of one source sample) on a pipeline's arrays.
+
+    Parameters
+    ----------
+    marginals : (S, T) array
+    edges : (E, 2) int64
+    support : Support
+    source_points, target_points : (S, 3), (T, 3) float64
+        Sample positions (any common frame; used only to find each source sample's own
+        target when self-matching).
+    params : ExtractParams
+    source : int, optional
+        Query this source sample instead of enumerating everything.
+    """
+    graph = SourceGraph.from_edges(edges, support.edge_length, len(marginals))
+    self_target = nearest_targets(source_points, target_points) if support.self_match else None
+    if source is not None:
+        return query(marginals, graph, support.targets, source, params, self_target)
+    return extract(marginals, graph, support.targets, params, self_target)
+
+
+def records(
+    symmetries: list[Symmetry],
+    source_vertex: np.ndarray,
+    target_vertex: np.ndarray,
+    support: Support,
+) -> list[dict]:
+    """JSON-ready symmetries in input-vertex indices (the ``symmetries.json`` entries).
+
+    ``source_vertices`` are the input vertices in the Voronoi cells of the part's source
+    samples. ``target_vertices`` are those in the cells of the target samples within
+    half the median source edge of an image sample (the image of a source cell is about
+    that wide). ``pairs`` are [source vertex, target vertex] of every sample pair.
+    """
+    t = support.targets
+    dilate = 0.5 * float(np.median(support.edge_length)) if len(support.edge_length) else 0.0
+    out = []
+    for sym in symmetries:
+        in_source = np.zeros(len(source_vertex) + 1, dtype=bool)
+        in_source[sym.source] = True
+        near = np.zeros(len(target_vertex) + 1, dtype=bool)
+        _dilate(near[:-1], sym.target, t.indptr, t.indices, t.dist, dilate)
+        out.append({
+            "kind": sym.kind,
+            "score": round(float(sym.score), 6),
+            "consistency": round(float(sym.consistency), 6),
+            "source_vertices": np.flatnonzero(in_source[support.vertex_source]).tolist(),
+            "target_vertices": np.flatnonzero(near[support.vertex_target]).tolist(),
+            "pairs": np.column_stack([source_vertex[sym.source], target_vertex[sym.target]]).tolist(),
+        })
+    return out

@@ -1,0 +1,217 @@
+"""Peak tracking and region growing on hand-made marginals over a circle.
+
+The shape is a circle of circumference 1: T = 40 targets 0.025 apart (target i at arc
+length i / 40) and S = 10 source samples at targets 0, 4, ..., 36, joined in a cycle by
+edges of length 0.1. Geodesics are arc lengths, so every expected map is known exactly:
+the identity sends sample i to target 4i, the mirror about the axis through targets 2
+and 22 sends it to (4 - 4i) mod 40 (no sample is a fixed point).
+"""
+
+import numpy as np
+import pytest
+
+from intrinsym.extract import (
+    ExtractParams,
+    SourceGraph,
+    _merge,
+    complete,
+    extract,
+    grow,
+    nearest_targets,
+    normalise_rows,
+    peaks,
+    query,
+    vertex_map,
+)
+from intrinsym.geodesics import SparseDistances
+
+T, S = 40, 10
+IDENTITY = 4 * np.arange(S)
+MIRROR = (4 - 4 * np.arange(S)) % T
+
+
+def circle_targets(radius: float = 0.2) -> SparseDistances:
+    ptr, idx, dist = [0], [], []
+    for i in range(T):
+        d = np.abs(np.arange(T) - i)
+        d = np.minimum(d, T - d) / T
+        keep = np.flatnonzero(d <= radius + 1e-12)
+        order = keep[np.argsort(d[keep], kind="stable")]
+        idx.extend(order)
+        dist.extend(d[order])
+        ptr.append(len(idx))
+    return SparseDistances(np.array(ptr), np.array(idx), np.array(dist), radius)
+
+
+TARGETS = circle_targets()
+EDGES = np.array([[i, (i + 1) % S] for i in range(S)])
+EDGES.sort(axis=1)
+GRAPH = SourceGraph.from_edges(EDGES, np.full(S, 0.1), S)
+SELF = IDENTITY.copy()
+
+
+def marginals(mirror_value=0.8, mirror=MIRROR, with_mirror=None):
+    """Identity peak 1.0, mirror peak ``mirror_value`` (rows in ``with_mirror``), floor 0.01."""
+    m = np.full((S, T), 0.01)
+    m[np.arange(S), IDENTITY] = 1.0
+    rows = np.arange(S) if with_mirror is None else np.asarray(with_mirror)
+    m[rows, mirror[rows]] = np.maximum(m[rows, mirror[rows]], mirror_value)
+    return m / m.sum(axis=1, keepdims=True)
+
+
+def test_source_graph_csr():
+    assert GRAPH.ptr.tolist() == [2 * i for i in range(S + 1)]
+    assert sorted(GRAPH.neighbour[GRAPH.ptr[0] : GRAPH.ptr[1]].tolist()) == [1, 9]
+    assert np.all(GRAPH.length == 0.1)
+
+
+def test_peaks_threshold_and_suppression():
+    row = np.zeros(T)
+    row[[3, 4, 20, 30]] = [0.9, 1.0, 0.6, 0.4]
+    # 3 is within 0.05 of the stronger 4; 30 is below half the maximum
+    assert peaks(row, TARGETS, 0.5, 0.05).tolist() == [4, 20]
+    assert peaks(row, TARGETS, 0.75, 0.05).tolist() == [4]
+    assert peaks(row, TARGETS, 0.5, 0.0).tolist() == [4, 3, 20]
+
+
+def test_grow_recovers_the_mirror_and_the_identity():
+    norm = normalise_rows(marginals())
+    assert grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.5, d_error=0.01)).tolist() == MIRROR.tolist()
+    assert grow(norm, GRAPH, TARGETS, 1, IDENTITY[1], ExtractParams(threshold=0.5, d_error=0.01)).tolist() == IDENTITY.tolist()
+
+
+def test_grow_stops_at_geodesic_error_and_threshold():
+    # sample 3's mirror peak is displaced by 2 targets (0.05): the edges 2-3 and 3-4
+    # then map to lengths 0.05 and 0.15 instead of 0.1 (error 0.05)
+    shifted = MIRROR.copy()
+    shifted[3] = (MIRROR[3] + 2) % T
+    norm = normalise_rows(marginals(mirror=shifted, with_mirror=[0, 1, 2, 3]))
+    strict = grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.5, d_error=0.03))
+    assert np.flatnonzero(strict >= 0).tolist() == [0, 1, 2]
+    loose = grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.5, d_error=0.06))
+    assert np.flatnonzero(loose >= 0).tolist() == [0, 1, 2, 3]
+    assert loose[3] == shifted[3]
+    # a mirror peak of 0.6 passes t = 0.5 but not t = 0.75
+    norm = normalise_rows(marginals(mirror_value=0.6, with_mirror=[1, 2, 3, 4]))
+    assert np.flatnonzero(grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.5, d_error=0.01)) >= 0).tolist() == [1, 2, 3, 4]
+    assert np.flatnonzero(grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.75, d_error=0.01)) >= 0).tolist() == [1]
+
+
+def test_query_returns_every_part_pair_with_kinds():
+    parts = query(marginals(), GRAPH, TARGETS, 2, ExtractParams(d_error=0.01), self_target=SELF)
+    assert sorted(p.kind for p in parts) == ["identity", "partial"]
+    mirror = next(p for p in parts if p.kind == "partial")
+    assert mirror.source.tolist() == list(range(S))
+    assert mirror.target.tolist() == MIRROR.tolist()
+    assert mirror.consistency == 1.0
+    # score: every row at normalised 0.8, all edges consistent
+    assert mirror.score == pytest.approx(0.8, rel=1e-6)
+    # without self positions there is no identity kind
+    assert {p.kind for p in query(marginals(), GRAPH, TARGETS, 2)} == {"partial"}
+
+
+def test_extract_separates_identity_and_finds_the_global_mirror():
+    result = extract(marginals(), GRAPH, TARGETS, ExtractParams(d_error=0.01), self_target=SELF)
+    assert [s.kind for s in result.symmetries] == ["global"]
+    assert result.global_index == 0
+    assert result.symmetries[0].target.tolist() == MIRROR.tolist()
+    both = extract(marginals(), GRAPH, TARGETS, ExtractParams(d_error=0.01, keep_identity=True), self_target=SELF)
+    assert sorted(s.kind for s in both.symmetries) == ["global", "identity"]
+
+
+def test_extract_partial_symmetry_is_not_global():
+    m = marginals(with_mirror=[1, 2, 3])
+    result = extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01), self_target=SELF)
+    assert result.global_index == -1
+    assert [s.source.tolist() for s in result.symmetries] == [[1, 2, 3]]
+    assert result.symmetries[0].kind == "partial"
+    assert extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01, min_fraction=0.4), self_target=SELF).symmetries == []
+
+
+def test_complete_fills_a_gap_by_geometry_alone():
+    # sample 4 has no mirror peak; its mapped neighbours 3 and 5 pin its image
+    norm = normalise_rows(marginals(with_mirror=[0, 1, 2, 3, 5, 6, 7, 8, 9]))
+    params = ExtractParams(d_error=0.01)
+    grown = grow(norm, GRAPH, TARGETS, 1, MIRROR[1], params, SELF)
+    assert grown[4] == -1 and np.sum(grown >= 0) == 9
+    assert complete(norm, GRAPH, TARGETS, grown, params).tolist() == MIRROR.tolist()
+    # a sample with a single mapped neighbour stays open
+    lone = np.where(np.arange(S) <= 3, MIRROR, -1)
+    assert complete(norm, GRAPH, TARGETS, lone, params).tolist() == lone.tolist()
+    result = extract(norm, GRAPH, TARGETS, params, self_target=SELF)
+    assert result.symmetries[result.global_index].target.tolist() == MIRROR.tolist()
+
+
+def test_merge_joins_agreeing_maps_only():
+    p = ExtractParams(d_error=0.01)
+    left = np.where(np.arange(S) <= 5, MIRROR, -1)
+    right = np.where(np.arange(S) >= 4, MIRROR, -1)
+    rotated = np.where(np.arange(S) >= 4, (IDENTITY + 8) % T, -1)
+    groups = _merge([left, right, rotated], GRAPH, TARGETS, p)
+    assert len(groups) == 2
+    assert any(g.tolist() == MIRROR.tolist() for g in groups)
+    # adjacent but not overlapping parts of one map merge across the edge 5-6
+    groups = _merge([np.where(np.arange(S) <= 5, MIRROR, -1), np.where(np.arange(S) >= 6, MIRROR, -1)],
+                    GRAPH, TARGETS, p)
+    assert [g.tolist() for g in groups] == [MIRROR.tolist()]
+
+
+def test_vertex_map_and_nearest_targets():
+    sym = query(marginals(), GRAPH, TARGETS, 2, ExtractParams(d_error=0.01))
+    mirror = next(s for s in sym if s.target.tolist() == MIRROR.tolist())
+    vertex_source = np.array([0, 0, 3, -1, 9])
+    target_vertex = 100 + np.arange(T)
+    assert vertex_map(mirror, vertex_source, target_vertex, S).tolist() == [100 + MIRROR[0], 100 + MIRROR[0], 100 + MIRROR[3], -1, 100 + MIRROR[9]]
+    angle = 2 * np.pi * np.arange(T) / T
+    pts = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(T)]) / (2 * np.pi)
+    assert nearest_targets(pts[IDENTITY] * 1.001, pts).tolist() == IDENTITY.tolist()
+
+
+@pytest.mark.parametrize("bad", [dict(threshold=0.0), dict(d_error=0.0), dict(global_fraction=2.0), dict(min_fraction=1.5), dict(max_count=0)])
+def test_params_validated(bad):
+    with pytest.raises(ValueError):
+        ExtractParams(**bad)
+
+
+def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
+    """End to end on a tiny generated figure: files, query without BP, evaluate with labels."""
+    import json
+
+    from intrinsym import cli, shapes
+    from intrinsym.extract import from_result
+    from intrinsym.pipeline import Result
+
+    figure = shapes.figure(resolution=4)
+    shapes.save(figure, tmp_path / "fig.off")
+    out = tmp_path / "out"
+    small = ["--source", "20", "--target", "200", "--iterations", "3", "--spin-cloud", "2000", "-q"]
+    assert cli.main(["detect", str(tmp_path / "fig.off"), "-o", str(out), *small]) == 0
+    listed = json.loads((out / "symmetries.json").read_text())
+    vmap = np.load(out / "symmetry_map.npy")
+    assert vmap.dtype == np.int64 and vmap.shape == (len(figure.vertices),)
+    assert all(s["kind"] in ("partial", "global") for s in listed)
+    assert [s["kind"] for s in listed].count("global") == int(vmap.max() >= 0)
+    for s in listed:
+        pairs = np.array(s["pairs"])
+        assert pairs.shape[1] == 2 and set(pairs[:, 0]) <= set(s["source_vertices"])
+    result = Result.load(out)
+    assert json.loads((out / "run.json").read_text())["seconds"]["extract"] >= 0
+
+    # the query reads the saved arrays and grows from the sample whose cell holds the vertex
+    sample = 3
+    vertex = int(result.source_vertex[sample])
+    expected = from_result(result.marginals, result.edges, result.support, result.source_points,
+                           result.target_points, result.params.extraction(), source=sample)
+    capsys.readouterr()
+    assert cli.main(["query", str(out), "--vertex", str(vertex), "--json"]) == 0
+    answer = json.loads(capsys.readouterr().out)
+    assert answer["source_sample"] == sample
+    assert [s["pairs"] for s in answer["symmetries"]] == [
+        np.column_stack([result.source_vertex[e.source], result.target_vertex[e.target]]).tolist() for e in expected]
+    assert cli.main(["query", str(out), "--vertex", str(10**6)]) == 2
+
+    assert cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "fig.sym.npy"),
+                     "--labels", str(tmp_path / "fig.labels.npy"), "--json"]) == 0
+    report = json.loads((out / "scores.json").read_text())
+    assert set(report["map"]["segmentation"]) == {"1", "2", "3", "4", "5"}
+    assert (out / "curve.png").is_file()
