@@ -50,7 +50,7 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert np.array_equal(again.marginals, r.marginals)
     assert again.params == r.params
     with np.load(out / "result.npz") as z:
-        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS)
+        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS)
 
 
 def test_deterministic_for_a_seed(spot, spot_result):
@@ -73,7 +73,7 @@ def test_trivial_match_removed_and_kept(spot):
     kept = intrinsym.detect(spot, remove_trivial=False, **SMALL)
     removed = intrinsym.detect(spot, remove_trivial=True, **SMALL)
     assert np.array_equal(kept.target_vertex, removed.target_vertex)
-    floor = np.float32(1.0 / (1.0 + 1.0 / 0.01))
+    floor = np.float32(removed.info["resolved"]["unary_floor"])
     # Euclidean distance is a lower bound of the geodesic one: every target this close
     # to its source point lies inside the removed radius (0.05 sqrt(area)).
     area = intrinsym.mesh.surface_area(spot)

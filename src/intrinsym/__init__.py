@@ -24,17 +24,22 @@ def example_path() -> Path:
     return Path(str(resources.files("intrinsym") / "data" / "spot.obj"))
 
 
-from .evaluate import MarginalScores, load_symmetry_map, score_marginals  # noqa: E402
+from .evaluate import MapScores, MarginalScores, load_symmetry_map, score_map, score_marginals  # noqa: E402
+from .extract import Extraction, ExtractParams, Symmetry  # noqa: E402
 from .mesh import InputError, Shape, load  # noqa: E402
 from .pipeline import Params, ParameterError, Result, detect, make_params, match  # noqa: E402
 
 __all__ = [
+    "ExtractParams",
+    "Extraction",
     "InputError",
+    "MapScores",
     "MarginalScores",
     "ParameterError",
     "Params",
     "Result",
     "Shape",
+    "Symmetry",
     "__version__",
     "detect",
     "example_path",
@@ -42,5 +47,6 @@ __all__ = [
     "load_symmetry_map",
     "make_params",
     "match",
+    "score_map",
     "score_marginals",
 ]

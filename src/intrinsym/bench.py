@@ -1,0 +1,283 @@
+"""Benchmark: the paper's Table 1 cases at their sizes, seconds per stage and BP figures.
+
+Every case runs the whole :func:`intrinsym.pipeline.detect` pipeline in a fresh child
+process (so that its peak memory is its own), then times a few single messages of the
+paper-literal dense form (Eq. 7 with the full |Pt| x |Pt| pairwise table) against ours
+on the same edges and the same inputs, and checks that they agree.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import resource
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import bp, example_path, model, pipeline
+
+
+@dataclass(frozen=True)
+class Case:
+    """A benchmark case.
+
+    Attributes
+    ----------
+    name : str
+    mesh : str
+        Mesh path; a relative path is looked up under the shared data folder and falls
+        back to the shipped example mesh when absent.
+    n_source, n_target : int
+        |Ps| and |Pt|.
+    paper_gpu_s, paper_cpu_s : float or None
+        The paper's Table 1 times (GTX280; 2.66 GHz CPU), 100 iterations.
+    """
+
+    name: str
+    mesh: str
+    n_source: int
+    n_target: int
+    paper_gpu_s: float | None = None
+    paper_cpu_s: float | None = None
+
+
+# Paper Table 1. The paper's own meshes are not available (DESIGN.md, data/README.md):
+# each case runs on a stand-in mesh of the shared data at the paper's |Ps| and |Pt|.
+TABLE1 = (
+    Case("dragon1", "static/stanford-bunny.obj", 115, 6000, 4.10, 2870.30),
+    Case("dragon2", "static/stanford-bunny.obj", 259, 11837, 40.39, 27083.92),
+    Case("cuboctahedron", "kids_sym/0001.isometry.1.off", 126, 10888, 16.83, 1075.45),
+    Case("star", "tosca_sym/victoria0.off", 479, 8000, 73.58, 28004.27),
+    Case("elephant", "tosca_sym/michael1.off", 271, 12722, 55.45, 36920.53),
+    Case("male figure", "tosca_sym/michael1.off", 270, 8000, 14.17, 12894.38),
+    Case("lantern", "tosca_sym/horse0.off", 111, 11434, 12.32, 8604.37),
+)
+
+SMALL = (Case("small", "static/spot.obj", 40, 400),)
+
+
+@dataclass
+class CaseResult:
+    """Measured figures of one case (seconds unless named otherwise).
+
+    Attributes
+    ----------
+    name, mesh : str
+    sizes : dict
+        |Ps|, |Pt|, edges, max degree, ... as in ``run.json``.
+    stages : dict of str -> float
+        Seconds per pipeline stage (load, prepare, sampling, geodesics, descriptors,
+        unary, bp, extract).
+    bp_setup, bp_per_iteration, bp_total : float
+    iterations : int
+    converged : bool
+    peak_memory_mb : float
+        Peak resident memory of the child process that ran the case.
+    dense_message_s, sparse_message_s : float
+        Mean time of one message, paper-literal dense form and ours, same edges.
+    dense_over_sparse : float
+    message_max_diff : float
+        Largest difference of the two max-normalised messages.
+    paper_gpu_s, paper_cpu_s : float or None
+    """
+
+    name: str
+    mesh: str
+    sizes: dict = field(default_factory=dict)
+    stages: dict = field(default_factory=dict)
+    bp_setup: float = 0.0
+    bp_per_iteration: float = 0.0
+    bp_total: float = 0.0
+    iterations: int = 0
+    converged: bool = False
+    peak_memory_mb: float = 0.0
+    dense_message_s: float = 0.0
+    sparse_message_s: float = 0.0
+    dense_over_sparse: float = 0.0
+    message_max_diff: float = 0.0
+    paper_gpu_s: float | None = None
+    paper_cpu_s: float | None = None
+
+
+def resolve_mesh(mesh: str, data_dir: Path | None) -> Path:
+    """The mesh file of a case: as given, under ``data_dir``, or the shipped example."""
+    path = Path(mesh)
+    if path.is_absolute() or path.is_file():
+        return path
+    if data_dir is not None and (data_dir / path).is_file():
+        return data_dir / path
+    return example_path()
+
+
+def message_timing(
+    mrf: model.MRF, n_messages: int = 3, block: int = 1024, seed: int = 0
+) -> tuple[float, float, float]:
+    """Time single messages of the dense paper form and of the sparse kernel, same edges.
+
+    The inputs are the unary times the first iteration's (uniform) messages, so both
+    forms compute the same first message of each edge. The dense form is Eq. 7 with
+    :func:`intrinsym.model.pairwise_dense`, evaluated in blocks of ``block`` rows of the
+    |Pt| x |Pt| table (whose construction from the sparse rows is not timed; beyond the
+    sparse radius the distance is set to inf, where Psi = rho^2 as for any distance
+    beyond longest edge + delta).
+
+    Returns
+    -------
+    dense_s, sparse_s : float
+        Mean seconds per message.
+    max_diff : float
+        Largest difference of the max-normalised messages.
+    """
+    n_s, n_t = mrf.unary.shape
+    ptr, directed = bp.incoming_edges(mrf.edges, n_s)
+    rng = np.random.default_rng(seed)
+    outs = rng.choice(2 * len(mrf.edges), size=min(n_messages, 2 * len(mrf.edges)), replace=False)
+    sender = mrf.edges[outs >> 1, outs & 1]
+    sweep = bp.sparse_sweep(mrf, np.float32)
+    read = np.ones((2 * len(mrf.edges), n_t), dtype=np.float32)
+    sweep(read, read.copy(), bp.Steps(sender[:1], np.array([0, 1]), outs[:1]))  # compile
+    tg = mrf.targets
+    rows = np.repeat(np.arange(n_t), np.diff(tg.indptr))
+    dense_s = sparse_s = 0.0
+    max_diff = 0.0
+    for s, out in zip(sender, outs):
+        write = read.copy()
+        step = bp.Steps(np.array([s]), np.array([0, 1]), np.array([out]))
+        t0 = time.perf_counter()
+        sweep(read, write, step)
+        sparse_s += time.perf_counter() - t0
+        h = mrf.unary[s].astype(np.float64)
+        msg = np.zeros(n_t)
+        d_edge = float(mrf.edge_length[out >> 1])
+        for lo in range(0, n_t, block):
+            hi = min(n_t, lo + block)
+            dist = np.full((hi - lo, n_t), np.inf)
+            sel = (rows >= lo) & (rows < hi)
+            dist[rows[sel] - lo, tg.indices[sel]] = tg.dist[sel]
+            t0 = time.perf_counter()
+            msg += model.pairwise_dense(d_edge, dist, mrf.lam, mrf.rho).T @ h[lo:hi]
+            dense_s += time.perf_counter() - t0
+        max_diff = max(max_diff, float(np.abs(msg / msg.max() - write[out]).max()))
+    k = len(outs)
+    return dense_s / k, sparse_s / k, max_diff
+
+
+def _peak_memory_mb() -> float:
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 2**20 if sys.platform == "darwin" else rss / 2**10
+
+
+def run_case(case: Case, data_dir: Path | None, iterations: int, n_messages: int, log: Callable[[str], None]) -> CaseResult:
+    """Run one case in this process: the pipeline, then the message timing."""
+    path = resolve_mesh(case.mesh, data_dir)
+    res = pipeline.detect(path, n_source=case.n_source, n_target=case.n_target, iterations=iterations, log=log)
+    info = res.info
+    mrf = model.MRF(
+        res.unary, res.edges, res.support.edge_length, res.support.targets,
+        info["resolved"]["lambda_normalised"], res.params.rho,
+    )
+    log("timing single messages, dense paper form against ours")
+    dense_s, sparse_s, diff = message_timing(mrf, n_messages)
+    b = info["bp"]
+    return CaseResult(
+        name=case.name,
+        mesh=str(path),
+        sizes=info["sizes"],
+        stages=info["seconds"],
+        bp_setup=b["setup_seconds"],
+        bp_per_iteration=b["seconds_per_iteration"],
+        bp_total=info["seconds"]["bp"],
+        iterations=b["iterations"],
+        converged=b["converged"],
+        peak_memory_mb=_peak_memory_mb(),
+        dense_message_s=dense_s,
+        sparse_message_s=sparse_s,
+        dense_over_sparse=dense_s / sparse_s if sparse_s > 0 else float("inf"),
+        message_max_diff=diff,
+        paper_gpu_s=case.paper_gpu_s,
+        paper_cpu_s=case.paper_cpu_s,
+    )
+
+
+def _child(case: Case, data_dir: Path | None, iterations: int, n_messages: int, queue) -> None:
+    try:
+        result = run_case(case, data_dir, iterations, n_messages, lambda line: queue.put(("log", line)))
+        queue.put(("done", asdict(result)))
+    except Exception as err:  # reported to the parent, which raises it
+        queue.put(("error", f"{case.name}: {type(err).__name__}: {err}"))
+
+
+def run(
+    cases: Sequence[Case],
+    data_dir: Path | None = None,
+    iterations: int = 100,
+    n_messages: int = 3,
+    log: Callable[[str, str], None] | None = None,
+) -> list[CaseResult]:
+    """Run cases one after another, each in a fresh child process.
+
+    Parameters
+    ----------
+    cases : sequence of Case
+    data_dir : Path, optional
+        Folder the cases' relative mesh paths are looked up in.
+    iterations : int
+        Maximum BP iterations (the paper: 100); BP stops earlier when it converges.
+    n_messages : int
+        Messages timed in the dense-against-sparse comparison.
+    log : callable(case name, line), optional
+        Progress lines of the running case.
+
+    Returns
+    -------
+    list of CaseResult
+    """
+    ctx = multiprocessing.get_context("spawn")
+    results = []
+    for case in cases:
+        queue = ctx.Queue()
+        proc = ctx.Process(target=_child, args=(case, data_dir, iterations, n_messages, queue))
+        proc.start()
+        while True:
+            kind, payload = queue.get()
+            if kind == "log":
+                if log is not None:
+                    log(case.name, payload)
+                continue
+            break
+        proc.join()
+        if kind == "error":
+            raise RuntimeError(payload)
+        results.append(CaseResult(**payload))
+    return results
+
+
+def default_data_dir() -> Path | None:
+    """The shared data folder (``$INTRINSYM_DATA`` or ``../shared/data``), if present."""
+    for candidate in (os.environ.get("INTRINSYM_DATA"), Path.cwd().parent / "shared" / "data"):
+        if candidate and Path(candidate).is_dir():
+            return Path(candidate)
+    return None
+
+
+def table(results: Sequence[CaseResult]) -> list[list[str]]:
+    """Rows of the printed table, header first."""
+    head = ["case", "|Ps|", "|Pt|", "max|N|", "geodesics", "descriptors", "bp setup", "bp/iter",
+            "bp", "iters", "total", "peak MB", "dense/ours", "paper GPU", "paper CPU"]
+    rows = [head]
+    for r in results:
+        st = r.stages
+        rows.append([
+            r.name, str(r.sizes["source"]), str(r.sizes["target"]), str(r.sizes["max_degree"]),
+            f"{st.get('geodesics', 0):.2f}", f"{st.get('descriptors', 0):.2f}", f"{r.bp_setup:.2f}",
+            f"{r.bp_per_iteration:.3f}", f"{r.bp_total:.2f}", f"{r.iterations}{'' if r.converged else '+'}",
+            f"{sum(st.values()):.1f}", f"{r.peak_memory_mb:.0f}", f"{r.dense_over_sparse:.0f}x",
+            "-" if r.paper_gpu_s is None else f"{r.paper_gpu_s:.1f}",
+            "-" if r.paper_cpu_s is None else f"{r.paper_cpu_s:.0f}",
+        ])
+    return rows
