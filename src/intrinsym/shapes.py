@@ -305,8 +305,8 @@ def _bump(t: np.ndarray) -> np.ndarray:
 
 #: The body of :func:`partial`: (longitude, latitude, angular radius, height) of each
 #: bump (degrees, degrees, radians, radius units), placed without any symmetry.
-BODY_BUMPS = ((205.0, 35.0, 0.9, 0.55), (265.0, -40.0, 0.7, -0.25), (300.0, 25.0, 0.5, 0.3),
-              (150.0, -55.0, 0.8, 0.35), (30.0, 65.0, 0.6, -0.2))
+BODY_BUMPS = ((205.0, 35.0, 0.9, 0.55), (265.0, -40.0, 0.7, -0.25), (290.0, 30.0, 0.5, 0.3),
+              (175.0, -60.0, 0.8, 0.35), (330.0, 75.0, 0.5, -0.2))
 
 
 def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> GeneratedShape:
@@ -316,8 +316,9 @@ def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> Ge
     ``4 * resolution`` latitude bands, poles single vertices, each quad split about its
     centre): radius 1 plus the bumps of :data:`BODY_BUMPS` (an irregular body, symmetric
     under no isometry) plus two limbs on the equator at longitudes 0 and 90 degrees.
-    A limb is a radial finger of ``length`` and angular half-width ``width`` (radians)
-    with a smaller "thumb" on one side, so that it has no symmetry of its own; the body
+    A limb is a radial paddle of ``length``, angular half-width ``width`` (radians) in
+    longitude and 1.6 ``width`` in latitude, with a "thumb" of 0.6 ``length`` on one
+    side, so that it has no (near-)symmetry of its own; the body
     bumps vanish on the limbs. The rotation by 90 degrees about z maps limb 1 onto
     limb 2 exactly (and grid vertices to grid vertices).
 
@@ -344,8 +345,8 @@ def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> Ge
     for k, start in enumerate((0, shift)):
         # longitude offset from the limb axis computed from integers: identical on both limbs
         offset = 2 * np.pi * ((lon_i - start + n_lon // 2) % n_lon - n_lon // 2) / n_lon
-        profile = length * _bump(np.hypot(offset, lat) / width) + 0.35 * length * _bump(
-            np.hypot(offset - 0.45 * width, lat - 0.5 * width) / (0.4 * width))
+        profile = length * _bump(np.hypot(offset, lat / 1.6) / width) + 0.6 * length * _bump(
+            np.hypot(offset - 0.5 * width, lat - 0.9 * width) / (0.5 * width))
         radius += profile
         limb[profile > 0] = k + 1
     one = limb == 1
