@@ -125,3 +125,23 @@ def test_labels_and_missing_entries(tmp_path):
     assert load_symmetry_map(tmp_path / "m.npy", 3, allow_missing=True).tolist() == [1, -1, 0]
     with pytest.raises(InputError, match="out of range"):
         load_symmetry_map(tmp_path / "m.npy", 3)
+
+
+def test_partial_ground_truth_scores_only_vertices_with_an_image(mirror):
+    from intrinsym.evaluate import score_marginals
+
+    v, f, sym = mirror
+    shape = _mesh.from_arrays(v, f)
+    part = np.abs(v[:, 0]) > 0.2
+    partial = np.where(part, sym, -1)
+    s = score_map(np.arange(len(v)), shape, partial)  # the identity: wrong wherever scored
+    assert s.n_vertices == part.sum() and s.within(0.0) == 0.0
+    assert score_map(sym, shape, partial).within(0.0) == 1.0
+    src = np.flatnonzero(part)[:5]
+    off = np.flatnonzero(~part)[:3]
+    tgt = np.arange(0, len(v), 7)
+    marg = np.full((8, len(tgt)), 1e-3)
+    best = [np.argmin(np.linalg.norm(v[tgt] - v[sym[s]], axis=1)) for s in src]
+    marg[np.arange(5), best] = 1.0
+    scores = score_marginals(marg, np.concatenate([src, off]), tgt, shape, partial)
+    assert scores.n_scored == 5 and scores.mirror_hit == 1.0

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from intrinsym import shapes
 from intrinsym.geodesics import mesh_edges
@@ -117,3 +118,33 @@ def test_generate_command_writes_mesh_and_ground_truth(tmp_path):
     assert cli.main(["generate", "star", "-o", str(tmp_path / "s.obj")]) == 2
     assert cli.main(["generate", "cuboctahedron", "-o", str(tmp_path / "c.off"), "--arms", "3"]) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_partial_limbs_are_exact_rotated_copies_and_the_body_has_no_symmetry():
+    g = shapes.partial(resolution=6)
+    (swap,) = g.symmetries
+    limbs = np.flatnonzero(g.labels > 0)
+    assert np.array_equal(np.flatnonzero(swap >= 0), limbs)  # -1 exactly off the limbs
+    assert np.array_equal(swap[swap[limbs]], limbs)  # an involution
+    assert label_permutation(g.labels[limbs], np.searchsorted(limbs, swap[limbs])) == {1: 2, 2: 1}
+    quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # +90 degrees about z
+    one, two = g.labels == 1, g.labels == 2
+    assert np.abs(g.vertices[one] @ quarter.T - g.vertices[swap[one]]).max() < 1e-12
+    assert np.abs(g.vertices[two] @ quarter - g.vertices[swap[two]]).max() < 1e-12
+    # the swap maps every limb triangle onto a limb triangle: an exact isometry of the limbs
+    inside = (g.labels[g.faces] > 0).all(axis=1)
+    mapped = {tuple(sorted(t)) for t in swap[g.faces[inside]].tolist()}
+    assert mapped == {tuple(sorted(t)) for t in g.faces[inside].tolist()}
+    # the body is not an extrinsic copy of itself under the rotation, the flip or a mirror
+    body = g.vertices[g.labels == 0]
+    tree = cKDTree(g.vertices)
+    for transform in (quarter, quarter.T, np.diag([1.0, 1.0, -1.0]), np.diag([-1.0, 1.0, 1.0])):
+        assert np.median(tree.query(body @ transform.T)[0]) > 0.05
+
+
+def test_generate_partial_writes_a_map_with_missing_entries(tmp_path):
+    from intrinsym import cli, evaluate
+
+    assert cli.main(["generate", "partial", "-o", str(tmp_path / "p.off"), "--resolution", "4"]) == 0
+    sym = evaluate.load_symmetry_map(tmp_path / "p.sym.npy", len(shapes.partial(4).vertices), allow_missing=True)
+    assert np.array_equal(sym, shapes.partial(4).symmetries[0]) and sym.min() == -1

@@ -128,7 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("evaluate", help="score a saved result against a symmetry map",
                        description="Marginal scores (mirror hit, peak recall, decoy recall, breadth) of OUT.")
     e.add_argument("out", help="directory written by detect")
-    e.add_argument("--symmetry-map", required=True, help="ground truth: TOSCA .sym, KIDS sym.txt or 0-based .npy")
+    e.add_argument("--symmetry-map", required=True,
+                   help="ground truth: TOSCA .sym, KIDS sym.txt or 0-based .npy (-1: no image, as in a partial "
+                        "symmetry; such vertices are not scored)")
     e.add_argument("--mesh", help="the mesh the result was computed on (default: the input named in run.json)")
     e.add_argument("--seed", type=int, default=0, help="seed of the decoy choice (default 0)")
     e.add_argument("--labels", help="part labels, one integer per vertex (.npy or text; 0 = no part): "
@@ -152,7 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--out", required=True, help="mesh file to write (.off)")
     g.add_argument("--arms", type=int, default=None, help="star: number of arms (default 5)")
     g.add_argument("--resolution", type=int, default=None,
-                   help="star, lantern, figure: grid cells per arm / per 45 degrees (default 12, 12, 10)")
+                   help="star, lantern, figure, partial: grid cells per arm / per 45 degrees "
+                        "(default 12, 12, 10, 16)")
     g.add_argument("--subdivisions", type=int, default=None, help="cuboctahedron: 1-to-4 subdivisions (default 3)")
 
     b = sub.add_parser("bench", help="time the pipeline on the paper's Table 1 cases",
@@ -336,7 +339,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "query":
         return _query(args, result, out)
     shape = mesh.load(args.mesh or result.info["input"])
-    sym = evaluate.load_symmetry_map(args.symmetry_map, len(shape.vertices))
+    sym = evaluate.load_symmetry_map(args.symmetry_map, len(shape.vertices), allow_missing=True)
     scores = evaluate.score_marginals(
         result.marginals, result.source_vertex, result.target_vertex, shape, sym, seed=args.seed
     )

@@ -145,16 +145,20 @@ def score_marginals(
     shape : mesh.Shape
         The input mesh (as loaded; it is cleaned and normalised to unit area here).
     sym : (N_in,) int
-        Ground-truth symmetric image of every input vertex.
+        Ground-truth symmetric image of every input vertex; -1 (a partial symmetry) for
+        none: source samples there are not scored.
     seed : int
         Seed of the decoy choice.
     """
     cleaned, vmap = mesh.clean(shape)
     area = mesh.surface_area(cleaned)
     graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(area), cleaned.faces)
-    src = vmap[np.asarray(source_vertex)]
+    image = np.asarray(sym)[np.asarray(source_vertex)]
+    has = image >= 0
+    marginals = np.asarray(marginals)[has]
+    src = vmap[np.asarray(source_vertex)[has]]
     tgt = vmap[np.asarray(target_vertex)]
-    mir = vmap[np.asarray(sym)[source_vertex]]
+    mir = vmap[image[has]]
     d_s = geodesics.distances_from(graph, src)
     d_g = geodesics.distances_from(graph, mir)
     rng = np.random.default_rng(seed)
@@ -182,12 +186,14 @@ class MapScores:
     thresholds : (K,) float64
         Error thresholds t.
     fraction : (K,) float64
-        Fraction of all vertices whose predicted image lies within t of the true one.
+        Fraction of the scored vertices (all that have a true image) whose predicted
+        image lies within t of the true one.
     mean_error : float
         Mean error over the vertices with a prediction (nan when there is none).
     coverage : float
-        Fraction of vertices with a prediction.
+        Fraction of the scored vertices with a prediction.
     n_vertices : int
+        Scored vertices.
     segmentation : dict
         Part label -> segmentation score in [0, 1] (empty without labels).
     """
@@ -323,7 +329,8 @@ def score_map(
     shape : mesh.Shape
         The input mesh as loaded.
     sym : (N,) int
-        True image of every input vertex.
+        True image of every input vertex; -1 (a partial symmetry) for none: only the
+        vertices with a true image are scored.
     thresholds : (K,) float
         In units of sqrt(surface area).
     labels : (N,) int, optional
@@ -331,8 +338,10 @@ def score_map(
     """
     cleaned, vmap = mesh.clean(shape)
     graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(mesh.surface_area(cleaned)), cleaned.faces)
-    pred = np.asarray(predicted, dtype=np.int64)
-    err = map_errors(np.where(pred >= 0, vmap[np.maximum(pred, 0)], -1), vmap[np.asarray(sym)], graph)
+    truth = np.asarray(sym, dtype=np.int64)
+    scored = truth >= 0
+    pred = np.asarray(predicted, dtype=np.int64)[scored]
+    err = map_errors(np.where(pred >= 0, vmap[np.maximum(pred, 0)], -1), vmap[truth[scored]], graph)
     has = pred >= 0
     return MapScores(
         thresholds=np.asarray(thresholds, dtype=np.float64),
@@ -340,7 +349,7 @@ def score_map(
         mean_error=float(np.mean(err[has])) if has.any() else float("nan"),
         coverage=float(np.mean(has)),
         n_vertices=len(pred),
-        segmentation={} if labels is None else segmentation_scores(pred, sym, labels),
+        segmentation={} if labels is None else segmentation_scores(predicted, truth, labels),
     )
 
 

@@ -9,10 +9,13 @@
   to its images under the arm rotations in the other.
 * :func:`figure`: a mirror-symmetric articulated figure (head, two arms, two legs) with
   its limbs posed differently: the left/right map is a near-isometry.
+* :func:`partial`: an irregular, asymmetric body carrying two identical limbs; its only
+  symmetry is partial (limb to limb), so its map is -1 off the limbs.
 
 Every triangulation is invariant under the symmetry group (each quad is split into four
 triangles about its centre), so the maps are exact vertex permutations, found by
-applying each isometry and matching vertices to 1e-9. Bending (posing) moves vertices but
+applying each isometry and matching vertices to 1e-9. A partial symmetry is a map that
+holds -1 for every vertex outside its parts (as ``symmetry_map.npy`` does). Bending (posing) moves vertices but
 keeps the indexing, so the maps of the unposed shape stay the ground truth. Shapes are
 centred at the origin, in arbitrary units (the pipeline normalises the area).
 """
@@ -28,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from .files import atomic_write
 
-NAMES = ("cuboctahedron", "star", "lantern", "figure")
+NAMES = ("cuboctahedron", "star", "lantern", "figure", "partial")
 
 
 @dataclass(frozen=True)
@@ -41,11 +44,13 @@ class GeneratedShape:
     vertices : (N, 3) float64
     faces : (F, 3) int64
     symmetries : (K, N) int64
-        Every non-identity ground-truth symmetry: vertex i maps to ``symmetries[k, i]``.
-        The first is the principal one (a rotation by one arm, the figure's mirror).
+        Every non-identity ground-truth symmetry: vertex i maps to ``symmetries[k, i]``,
+        -1 where a partial symmetry gives i no image. The first is the principal one (a
+        rotation by one arm, the figure's mirror, the partial shape's limb swap).
     labels : (N,) int64
         Part label of every vertex (1, 2, ...; 0 = in no part): the cuboctahedron's 12
-        vertex neighbourhoods, the arms, the figure's limbs (1/2 arms, 3/4 legs, 5 head).
+        vertex neighbourhoods, the arms, the figure's limbs (1/2 arms, 3/4 legs, 5 head),
+        the partial shape's two limbs.
     """
 
     name: str
@@ -128,6 +133,29 @@ def cuboctahedron(subdivisions: int = 3) -> GeneratedShape:
     return GeneratedShape("cuboctahedron", v, f, _vertex_maps(v, group), labels)
 
 
+def _latlon_mesh(ring: np.ndarray, pole: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Close a latitude-longitude grid of vertices (n_lat, n_lon, 3) into a triangle mesh.
+
+    Vertices: the grid (row-major), the poles (0, 0, -pole) and (0, 0, pole), then one
+    centre per quad (:func:`_split_quads`); the poles are fanned to the first and last row.
+
+    Returns
+    -------
+    vertices (N, 3), faces (F, 3), quads (Q, 4): the grid quads (row-major), whose
+    centres are vertices ``n_lat * n_lon + 2 + q``.
+    """
+    n_lat, n_lon = ring.shape[:2]
+    v = np.vstack([ring.reshape(-1, 3), [[0.0, 0.0, -pole], [0.0, 0.0, pole]]])
+    south, north = n_lat * n_lon, n_lat * n_lon + 1
+    idx = np.arange(n_lat * n_lon).reshape(n_lat, n_lon)
+    nxt = np.roll(idx, -1, axis=1)
+    quads = np.stack([idx[:-1], nxt[:-1], nxt[1:], idx[1:]], axis=-1).reshape(-1, 4)
+    caps = np.concatenate([np.column_stack([nxt[0], idx[0], np.full(n_lon, south)]),
+                           np.column_stack([idx[-1], nxt[-1], np.full(n_lon, north)])])
+    v, f = _split_quads(v, quads)
+    return v, np.vstack([f, caps]), quads
+
+
 def _lobed(
     lobes: np.ndarray, length: float, width: float, n_lon: int, n_lat: int, thickness: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -154,15 +182,7 @@ def _lobed(
     rr = r[grid_lon] * np.cos(grid_lat)
     ring = np.column_stack([rr.ravel() * np.cos(lon[grid_lon.ravel()]), rr.ravel() * np.sin(lon[grid_lon.ravel()]),
                             thickness * np.sin(grid_lat.ravel())])
-    v = np.vstack([ring, [[0, 0, -thickness], [0, 0, thickness]]])
-    south, north = len(ring), len(ring) + 1
-    idx = np.arange(len(ring)).reshape(len(lat), n_lon)
-    nxt = np.roll(idx, -1, axis=1)
-    quads = np.stack([idx[:-1], nxt[:-1], nxt[1:], idx[1:]], axis=-1).reshape(-1, 4)
-    caps = np.concatenate([np.column_stack([nxt[0], idx[0], np.full(n_lon, south)]),
-                           np.column_stack([idx[-1], nxt[-1], np.full(n_lon, north)])])
-    v, f = _split_quads(v, quads)
-    f = np.vstack([f, caps])
+    v, f, _ = _latlon_mesh(ring.reshape(len(lat), n_lon, 3), thickness)
     angle = np.arctan2(v[:, 1], v[:, 0])
     gap = np.abs(np.angle(np.exp(1j * (angle[:, None] - lobes[None, :]))))
     nearest = gap.argmin(axis=1)
@@ -278,9 +298,84 @@ def figure(resolution: int = 10) -> GeneratedShape:
     return GeneratedShape("figure", v, f, sym, parts)
 
 
+def _bump(t: np.ndarray) -> np.ndarray:
+    """Smooth bump (1 - t^2)^3 of compact support |t| < 1."""
+    return np.clip(1.0 - t**2, 0.0, None) ** 3
+
+
+#: The body of :func:`partial`: (longitude, latitude, angular radius, height) of each
+#: bump (degrees, degrees, radians, radius units), placed without any symmetry.
+BODY_BUMPS = ((205.0, 35.0, 0.9, 0.55), (265.0, -40.0, 0.7, -0.25), (290.0, 30.0, 0.5, 0.3),
+              (175.0, -60.0, 0.8, 0.35), (330.0, 75.0, 0.5, -0.2))
+
+
+def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> GeneratedShape:
+    """An asymmetric blob with two identical limbs; the limb swap is its only symmetry.
+
+    A star-shaped surface over a latitude-longitude grid (``8 * resolution`` longitudes,
+    ``4 * resolution`` latitude bands, poles single vertices, each quad split about its
+    centre): radius 1 plus the bumps of :data:`BODY_BUMPS` (an irregular body, symmetric
+    under no isometry) plus two limbs on the equator at longitudes 0 and 90 degrees.
+    A limb is a radial paddle of ``length``, angular half-width ``width`` (radians) in
+    longitude and 1.6 ``width`` in latitude, with a "thumb" of 0.6 ``length`` on one
+    side, so that it has no (near-)symmetry of its own; the body
+    bumps vanish on the limbs. The rotation by 90 degrees about z maps limb 1 onto
+    limb 2 exactly (and grid vertices to grid vertices).
+
+    Returns
+    -------
+    GeneratedShape
+        ``symmetries`` (1, N): the involution limb 1 <-> limb 2 (rotation by +90 / -90
+        degrees), -1 for every vertex off the limbs; ``labels`` 1 and 2 on the limbs
+        (vertices where the limb's profile is positive), 0 elsewhere.
+    """
+    if resolution < 4:
+        raise ValueError("partial needs resolution >= 4")
+    n_lon, n_lat = 8 * resolution, 4 * resolution
+    shift = 2 * resolution  # 90 degrees in longitude cells
+    lon_i, lat_i = np.meshgrid(np.arange(n_lon), np.arange(1, n_lat), indexing="xy")
+    lon, lat = 2 * np.pi * lon_i / n_lon, np.pi * (lat_i / n_lat - 0.5)
+    direction = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+    radius = np.ones(lon.shape)
+    for c_lon, c_lat, size, height in BODY_BUMPS:
+        c_lon, c_lat = np.radians(c_lon), np.radians(c_lat)
+        centre = np.array([np.cos(c_lat) * np.cos(c_lon), np.cos(c_lat) * np.sin(c_lon), np.sin(c_lat)])
+        radius += height * _bump(np.arccos(np.clip(direction @ centre, -1.0, 1.0)) / size)
+    limb = np.zeros(lon.shape, dtype=np.int64)
+    for k, start in enumerate((0, shift)):
+        # longitude offset from the limb axis computed from integers: identical on both limbs
+        offset = 2 * np.pi * ((lon_i - start + n_lon // 2) % n_lon - n_lon // 2) / n_lon
+        profile = length * _bump(np.hypot(offset, lat / 1.6) / width) + 0.6 * length * _bump(
+            np.hypot(offset - 0.5 * width, lat - 0.9 * width) / (0.5 * width))
+        radius += profile
+        limb[profile > 0] = k + 1
+    one = limb == 1
+    if np.any(np.roll(limb, -shift, axis=1)[one] != 2) or np.any(np.roll(radius, -shift, axis=1)[one] != radius[one]):
+        raise AssertionError("a body bump reaches a limb, or the limbs overlap")
+    v, f, quads = _latlon_mesh(radius[..., None] * direction, 1.0)
+    idx = np.arange(limb.size).reshape(limb.shape)
+    south, north = limb.size, limb.size + 1
+    # labels: grid vertices by their profile, quad centres where all four corners agree
+    corner = limb.ravel()[quads]
+    labels = np.concatenate([limb.ravel(), [0, 0], np.where((corner == corner[:, :1]).all(axis=1), corner[:, 0], 0)])
+    # the swap, combinatorially: +shift longitude cells on limb 1, -shift on limb 2
+    grid = np.concatenate([idx.ravel(), [south, north]])
+    rolled = {1: np.roll(idx, -shift, axis=1).ravel(), 2: np.roll(idx, shift, axis=1).ravel()}
+    quad_of = np.full(limb.size, -1, dtype=np.int64)
+    quad_of[quads[:, 0]] = np.arange(len(quads))
+    sym = np.full(len(v), -1, dtype=np.int64)
+    for k, image in rolled.items():
+        on = np.flatnonzero(limb.ravel() == k)
+        sym[grid[on]] = image[on]
+        q = np.flatnonzero(labels[len(grid):] == k)
+        sym[len(grid) + q] = len(grid) + quad_of[image[quads[q, 0]]]
+    return GeneratedShape("partial", v, f, sym[None, :], labels)
+
+
 def generate(name: str, **options) -> GeneratedShape | tuple[GeneratedShape, GeneratedShape]:
     """The shape ``name`` (one of :data:`NAMES`) with its options."""
-    builders = {"cuboctahedron": cuboctahedron, "star": star, "lantern": lantern, "figure": figure}
+    builders = {"cuboctahedron": cuboctahedron, "star": star, "lantern": lantern, "figure": figure,
+                "partial": partial}
     if name not in builders:
         raise ValueError(f"unknown shape {name!r}; expected one of {', '.join(NAMES)}")
     return builders[name](**options)
