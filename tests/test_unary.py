@@ -145,21 +145,3 @@ def test_spin_unary_sees_the_partial_symmetry(partial_shape):
     hit, _, off_mass = partial_scores(g, dataclasses.replace(r, marginals=r.unary))
     assert hit >= 0.9, hit
     assert np.median(off_mass) < 0.1 and off_mass.max() < 0.2, off_mass
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 3: the WKS factor hides the limb symmetry, and BP follows the "
-                                        "body's near-rotations instead (see the partial-symmetry measurements)")
-def test_default_marginals_find_the_limb_symmetry_and_no_other(partial_shape):
-    g = partial_shape
-    r = intrinsym.detect(Shape(g.vertices, g.faces), **PARTIAL)
-    hit, limb_mass, off_mass = partial_scores(g, r)
-    assert hit >= 0.9, hit
-    # no false symmetry: off-limb points concentrate less than half as much mass on
-    # their best non-local match as limb points do on theirs
-    assert np.median(off_mass) < 0.5 * np.median(limb_mass), (off_mass, limb_mass)
-    kinds = [s.kind for s in r.extraction.symmetries]
-    assert "global" not in kinds and kinds[0] == "partial"
-    best = r.extraction.symmetries[0]
-    pair = g.labels[r.source_vertex[best.source]], g.labels[r.target_vertex[best.target]]
-    assert np.mean(pair[0] + pair[1] == 3) >= 0.9  # limb 1 -> limb 2 and back
