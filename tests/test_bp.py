@@ -15,7 +15,8 @@ from intrinsym.bp import (
     resolve_backend,
     schedule_steps,
     serial_orders,
-    skip_bound,
+    visiting_orders,
+    colour_classes,
     weight_polynomial,
 )
 from intrinsym import bp_gpu
@@ -64,7 +65,7 @@ def sphere_problem(n_source: int, n_target: int, k: int, seed: int, tolerance: f
     return MRF(unary, edges, length, targets, lam, rho), d_tt
 
 
-@pytest.mark.parametrize("schedule", ["serial", "flooding"])
+@pytest.mark.parametrize("schedule", ["serial", "colour", "flooding"])
 @pytest.mark.parametrize(
     "n_source,n_target,k,iters", [(40, 300, 4, 6), (12, 2000, 3, 2)]
 )
@@ -129,7 +130,7 @@ def test_tree_marginals_equal_brute_force():
     joint /= joint.sum()
     exact = np.array([joint.sum(axis=tuple(a for a in range(5) if a != s)) for s in range(5)])
 
-    for schedule in ("serial", "flooding"):
+    for schedule in ("serial", "colour", "flooding"):
         res = belief_propagation(mrf, schedule=schedule, iterations=50, tol=1e-12, dtype=np.float64)
         assert res.converged
         assert np.abs(res.marginals - exact).max() < 1e-9
@@ -162,9 +163,33 @@ def test_serial_steps_update_every_directed_edge_once():
     # backward: 2 -> 0 (5), 2 -> 1 (3); 0 -> 1 (0); 1 sends nothing
     assert sent == [[1, 2], [4], [], [3, 5], [0], []]
     assert sorted(steps.out.tolist()) == list(range(6))
+    # a new batch wherever the step's node was just sent to: 0 (by 1), 2 (by 0), 0, 1
+    assert steps.batch.tolist() == [0, 1, 2, 4, 5, 6]
     flood = schedule_steps("flooding", np.arange(3), edges, ptr, directed)
     assert flood.node.tolist() == [0, 1, 2]
     assert sorted(flood.out.tolist()) == list(range(6))
+    assert flood.batch.tolist() == [0, 3]
+
+
+def test_colour_schedule_batches_whole_classes():
+    """A 6-cycle with the chord 0-2: a proper colouring, each class one batch, every
+    directed edge sent once per iteration."""
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 0], [0, 2]])
+    colour = colour_classes(edges, 6)
+    assert np.all(colour[edges[:, 0]] != colour[edges[:, 1]])
+    # largest degree first (0, 2), then index order: hand-checked greedy colours
+    assert colour.tolist() == [0, 2, 1, 0, 1, 2]
+    ptr, directed = incoming_edges(edges, 6)
+    orders = visiting_orders("colour", edges, 6, 4, seed=2)
+    for order in orders:
+        steps = schedule_steps("colour", order, edges, ptr, directed)
+        assert sorted(steps.out.tolist()) == list(range(14))
+        for b in range(len(steps.batch) - 1):
+            nodes = steps.node[steps.batch[b] : steps.batch[b + 1]]
+            assert len(set(colour[nodes].tolist())) == 1
+            assert len(nodes) == np.sum(colour == colour[nodes[0]])
+    assert all(np.array_equal(o, orders[0]) for o in orders)
+    assert np.all(np.diff(colour[orders[0]]) >= 0)
 
 
 def test_incoming_edges():
@@ -187,38 +212,6 @@ def test_weight_polynomial_matches_exp(rho, tol):
     t = np.linspace(0.0, 1.0, 10001)
     exact = np.exp(-np.log(1 / rho**2) * t) - rho**2
     assert np.abs(np.polynomial.polynomial.polyval(t, weight_polynomial(1.0, rho)) - exact).max() < tol
-
-
-def test_skip_bound_hand_checked():
-    # rho = 0.5: r = skip * 0.75 / 0.25 = 3 skip; bound r / (1 - r)
-    assert skip_bound(0.0, 0.5) == 0.0
-    assert skip_bound(0.1, 0.5) == pytest.approx(0.3 / 0.7)
-    assert skip_bound(0.5, 0.5) == np.inf
-
-
-def test_skipping_stays_within_its_bound():
-    """One flooding iteration from uniform messages: every message is within
-    b = skip_bound of the exact one, so every belief (a product of deg messages,
-    normalised) is within ((1 + b) / (1 - b))^deg - 1, relative."""
-    mrf, _ = sphere_problem(30, 800, 4, seed=6)
-    # a unary spanning four decades, as a peaked posterior does, so that labels get skipped
-    unary = 10.0 ** np.random.default_rng(6).uniform(-4, 0, size=mrf.unary.shape)
-    mrf = MRF(unary, mrf.edges, mrf.edge_length, mrf.targets, mrf.lam, mrf.rho)
-    deg = np.bincount(mrf.edges.ravel(), minlength=mrf.n_source)
-    kw = dict(schedule="flooding", iterations=1, tol=0.0, dtype=np.float64)
-    exact = belief_propagation(mrf, **kw).marginals
-    for skip in (0.01, 0.05):
-        approx = belief_propagation(mrf, skip=skip, **kw).marginals
-        b = skip_bound(skip, mrf.rho)
-        rel = np.abs(approx / exact - 1.0).max(axis=1)
-        assert np.all(rel <= ((1 + b) / (1 - b)) ** deg - 1.0)
-        assert rel.max() > 1e-9  # labels were really skipped
-    # serial BP to convergence with a small threshold stays close to exact
-    kw = dict(schedule="serial", iterations=30, tol=1e-7, dtype=np.float64)
-    exact = belief_propagation(mrf, **kw).marginals
-    approx = belief_propagation(mrf, skip=1e-3, **kw).marginals
-    b = skip_bound(1e-3, mrf.rho)
-    assert np.abs(approx / exact - 1.0).max() <= ((1 + b) / (1 - b)) ** deg.max() - 1.0
 
 
 def test_backend_choice():

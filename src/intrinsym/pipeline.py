@@ -78,17 +78,16 @@ class Params:
     lam : float or None
         Raw lambda of Eq. 6 in 1 / (input length unit)^2 (paper: 1e6 in its units);
         overrides ``tolerance``. Not scale-free, by definition.
-    schedule : {"serial", "flooding"}
+    schedule : {"serial", "colour", "flooding"}
+        BP message schedule (:func:`intrinsym.bp.belief_propagation`). "colour" (default)
+        is a serial schedule whose independent updates run as one batch; "serial" is the
+        paper's node-by-node sweeps.
     iterations : int
         Maximum BP iterations T (paper: 100).
     bp_tol : float
         Stop BP when the largest change of a max-normalised message is below this.
     damping : float
         Message damping in [0, 1).
-    bp_skip : float
-        Label skipping in BP: 0 is exact; otherwise labels whose outgoing weight is below
-        ``bp_skip`` times the mean are skipped, each message staying within
-        :func:`intrinsym.bp.skip_bound` of the exact one.
     backend : {"auto", "cpu", "gpu"}
         Where BP runs (:func:`intrinsym.bp.resolve_backend`): "auto" is the GPU when
         CuPy sees a CUDA device and the schedule is flooding, else the CPU.
@@ -133,11 +132,10 @@ class Params:
     rho: float = 0.4
     tolerance: float = 1.5
     lam: float | None = None
-    schedule: str = "serial"
+    schedule: str = "colour"
     iterations: int = 100
     bp_tol: float = 1e-4
     damping: float = 0.0
-    bp_skip: float = 0.0
     backend: str = "auto"
     remove_trivial: bool = True
     trivial_radius: float = 0.05
@@ -168,7 +166,6 @@ class Params:
             (self.schedule not in bp.SCHEDULES, f"schedule must be one of {bp.SCHEDULES}"),
             (self.iterations < 1, "iterations must be at least 1"),
             (not 0 <= self.damping < 1, "damping must lie in [0, 1)"),
-            (not self.bp_skip >= 0, "bp_skip must be non-negative"),
             (self.backend not in bp.BACKENDS, f"backend must be one of {bp.BACKENDS}"),
             (self.trivial_radius < 0, "trivial_radius must be non-negative"),
             (self.dtype not in ("float32", "float64"), "dtype must be float32 or float64"),
@@ -535,7 +532,7 @@ def _solve(
             log(f"bp iteration {it}: max message change {change:.3g}")
 
     res = bp.belief_propagation(
-        mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, skip=p.bp_skip, backend=p.backend
+        mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
     )
     clock.lap("bp")
     support = extract.Support(
