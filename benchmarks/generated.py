@@ -109,7 +109,7 @@ def corner_recovery(result: intrinsym.Result, shape: shapes.GeneratedShape) -> t
         s = int(np.argmin(dist[i, result.source_vertex]))
         peaks = extract.peaks(result.marginals[s], result.support.targets, params.threshold, params.peak_radius)
         parts = extract.from_result(result.marginals, result.edges, result.support, result.source_points,
-                                    result.target_points, params, source=s)
+                                    result.target_points, params, source=s, unary=result.unary)
         images = [int(p.target[np.searchsorted(p.source, s)]) for p in parts if p.kind != "identity"]
         others = np.delete(dist, i, axis=0)
         for found, targets in ((found_peaks, peaks), (found_parts, images)):

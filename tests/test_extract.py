@@ -142,6 +142,30 @@ def test_complete_fills_a_gap_by_geometry_alone():
     assert result.symmetries[result.global_index].target.tolist() == MIRROR.tolist()
 
 
+ROTATION = (IDENTITY + 8) % T  # turns the circle by a fifth: another isometry
+
+
+def test_unary_peaks_seed_the_symmetries_bp_lost():
+    """Marginals that kept only the mirror, a unary that also has the rotation: the
+    rotation is found from the unary's peaks, scored on the marginals; the unary's copy
+    of the mirror is dropped, not merged, so the mirror stays the marginals' own."""
+    m = marginals()
+    u = marginals(mirror=ROTATION)
+    p = ExtractParams(d_error=0.01)
+    alone = extract(m, GRAPH, TARGETS, p, self_target=SELF)
+    both = extract(m, GRAPH, TARGETS, p, self_target=SELF, unary=u)
+    assert [s.target.tolist() for s in alone.symmetries] == [MIRROR.tolist()]
+    assert [s.target.tolist() for s in both.symmetries] == [MIRROR.tolist(), ROTATION.tolist()]
+    assert [s.kind for s in both.symmetries] == ["global", "partial"]
+    assert both.symmetries[1].score < 0.05 < both.symmetries[0].score  # the marginals barely support it
+    # a partial mirror in the marginals is not extended by the unary's full mirror
+    part = extract(marginals(with_mirror=[1, 2, 3]), GRAPH, TARGETS, p, self_target=SELF, unary=m)
+    assert [s.source.tolist() for s in part.symmetries] == [[1, 2, 3]]
+    # query: the rotation appears among the chosen point's parts
+    images = {tuple(s.target.tolist()) for s in query(m, GRAPH, TARGETS, 2, p, SELF, unary=u)}
+    assert tuple(ROTATION.tolist()) in images and tuple(MIRROR.tolist()) in images
+
+
 def test_merge_joins_agreeing_maps_only():
     p = ExtractParams(d_error=0.01)
     left = np.where(np.arange(S) <= 5, MIRROR, -1)

@@ -92,6 +92,8 @@ def test_paper_preset():
     p = pipeline.make_params("paper")
     assert (p.rho, p.gamma, p.schedule, p.iterations, p.remove_trivial) == (0.4, 0.01, "serial", 100, False)
     assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
+    assert not p.unary_seeds and not p.extraction().unary_seeds
+    assert pipeline.make_params().extraction().unary_seeds
     with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
         pipeline.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):

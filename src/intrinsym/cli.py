@@ -73,6 +73,8 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
                        help="put the unary at its floor near each source point (default, except with --preset paper)")
         g.add_argument("--keep-trivial", dest="remove_trivial", action="store_false",
                        help="keep the trivial (identity) match in the model, as the paper does")
+    p.add_argument("--unary-seeds", dest="unary_seeds", action=argparse.BooleanOptionalAction, default=None,
+                   help="extraction: also grow symmetries from the unary's peaks (default on; off with --preset paper)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
     p.add_argument("--figures", action="store_true", help="also write the PNGs of 'intrinsym render' to OUT/figures")
@@ -174,7 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _overrides(args: argparse.Namespace) -> dict:
-    names = [dest for _, dest, _, _ in MODEL_OPTIONS] + ["remove_trivial"]
+    names = [dest for _, dest, _, _ in MODEL_OPTIONS] + ["remove_trivial", "unary_seeds"]
     return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
 
 
@@ -386,7 +388,7 @@ def _query(args: argparse.Namespace, result: pipeline.Result, out: Path) -> int:
     p = dataclasses.replace(result.params, **{k: v for k, v in (("peak_threshold", args.peak_threshold),
                                                                 ("d_error", args.d_error)) if v is not None})
     found = extract.from_result(result.marginals, result.edges, result.support, result.source_points,
-                                result.target_points, p.extraction(), source=sample)
+                                result.target_points, p.extraction(), source=sample, unary=result.unary)
     listed = extract.records(found, result.source_vertex, result.target_vertex, result.support)
     for record, sym in zip(listed, found):
         record["image_vertex"] = int(result.target_vertex[sym.target[np.searchsorted(sym.source, sample)]])

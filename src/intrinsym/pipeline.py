@@ -36,7 +36,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # paper's behaviour (BP converging in a handful of iterations, sharpening the unary
     # rather than smearing it); 1.5 spacings measured a far weaker model on TOSCA cat0.
     "paper": dict(rho=0.4, gamma=0.01, schedule="serial", iterations=100, remove_trivial=False, tolerance=0.5,
-                  unary="spin", potential="paper"),
+                  unary="spin", potential="paper", unary_seeds=False),
 }
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
@@ -118,6 +118,9 @@ class Params:
         Symmetry extraction (paper Sec. 5.1): peak threshold t on the max-normalised
         marginal (paper: 0.5-0.75) and geodesic error bound of the region growing
         (paper: 0.001-0.15); see :class:`intrinsym.extract.ExtractParams`.
+    unary_seeds : bool
+        Also grow symmetries from the peaks of the unary, not only of the marginals
+        (beyond the paper; :func:`intrinsym.extract.extract`).
     """
 
     n_source: int | None = 250
@@ -149,6 +152,7 @@ class Params:
     unary_floor: float = 1e-3
     peak_threshold: float = extract.ExtractParams.threshold
     d_error: float = extract.ExtractParams.d_error
+    unary_seeds: bool = True
 
     def __post_init__(self) -> None:
         checks = [
@@ -199,7 +203,7 @@ class Params:
 
     def extraction(self) -> extract.ExtractParams:
         """The symmetry-extraction parameters."""
-        return extract.ExtractParams(threshold=self.peak_threshold, d_error=self.d_error)
+        return extract.ExtractParams(threshold=self.peak_threshold, d_error=self.d_error, unary_seeds=self.unary_seeds)
 
 
 def make_params(preset: str = "default", **overrides: Any) -> Params:
@@ -543,7 +547,7 @@ def _solve(
         self_match=self_match,
     )
     extraction = extract.from_result(
-        res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction()
+        res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary
     )
     clock.lap("extract")
     info = {
