@@ -158,6 +158,9 @@ def test_unary_peaks_seed_the_symmetries_bp_lost():
     assert [s.target.tolist() for s in both.symmetries] == [MIRROR.tolist(), ROTATION.tolist()]
     assert [s.kind for s in both.symmetries] == ["global", "partial"]
     assert both.symmetries[1].score < 0.05 < both.symmetries[0].score  # the marginals barely support it
+    # the parameter turns the extra seeds off
+    off = extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01, unary_seeds=False), self_target=SELF, unary=u)
+    assert [s.target.tolist() for s in off.symmetries] == [MIRROR.tolist()]
     # a partial mirror in the marginals is not extended by the unary's full mirror
     part = extract(marginals(with_mirror=[1, 2, 3]), GRAPH, TARGETS, p, self_target=SELF, unary=m)
     assert [s.source.tolist() for s in part.symmetries] == [[1, 2, 3]]

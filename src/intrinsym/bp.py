@@ -485,13 +485,16 @@ def _run(
     ptr, directed = incoming_edges(edges, n_s)
     messages = np.ones((2 * len(edges), n_t), dtype=dtype)
     orders = visiting_orders(schedule, edges, n_s, iterations, seed)
+    # only the serial schedule changes its order between iterations
+    fixed = None if schedule == "serial" else schedule_steps(schedule, orders[0], edges, ptr, directed)
 
     def update(it: int) -> float:
         nonlocal messages
+        steps = fixed if fixed is not None else schedule_steps(schedule, orders[it], edges, ptr, directed)
         if schedule != "flooding":
-            return sweep(messages, messages, schedule_steps(schedule, orders[it], edges, ptr, directed))
+            return sweep(messages, messages, steps)
         new = messages.copy()
-        change = sweep(messages, new, schedule_steps(schedule, orders[0], edges, ptr, directed))
+        change = sweep(messages, new, steps)
         messages = new
         return change
 

@@ -61,8 +61,8 @@ class ExtractParams:
     keep_identity : bool
         Report identity symmetries too.
     unary_seeds : bool
-        :func:`from_result` also seeds parts from the unary's peaks (beyond the paper;
-        see :func:`extract`).
+        When :func:`extract` or :func:`query` is given the unary, also seed parts from
+        its peaks (beyond the paper; see :func:`extract`).
     """
 
     threshold: float = 0.5
@@ -527,8 +527,8 @@ def query(
         The target sample at each source sample's own position (self-matching); enables
         the "identity" kind.
     unary : (S, T) array, optional
-        Also grow from the peaks of the unary that no part grown from the marginals
-        covers, on the unary (see :func:`extract`).
+        With ``params.unary_seeds``, also grow from the peaks of the unary that no part
+        grown from the marginals covers, on the unary (see :func:`extract`).
 
     Returns
     -------
@@ -538,7 +538,7 @@ def query(
     norm = normalise_rows(marginals)
     found = []
     covered = np.zeros(norm.shape, dtype=np.bool_)
-    for field in _fields(norm, unary):
+    for field in _fields(norm, unary, params):
         for t in peaks(field[source], targets, params.threshold, params.peak_radius):
             if covered[source, t]:
                 continue
@@ -549,9 +549,10 @@ def query(
     return sorted(found, key=lambda s: -s.score)
 
 
-def _fields(norm: np.ndarray, unary: np.ndarray | None) -> list[np.ndarray]:
-    """The row-max-normalised fields to seed and grow from: the marginals, then the unary."""
-    return [norm] if unary is None else [norm, normalise_rows(unary)]
+def _fields(norm: np.ndarray, unary: np.ndarray | None, p: ExtractParams) -> list[np.ndarray]:
+    """The row-max-normalised fields to seed and grow from: the marginals, then the
+    unary when given and ``p.unary_seeds``."""
+    return [norm, normalise_rows(unary)] if unary is not None and p.unary_seeds else [norm]
 
 
 def _merge(
@@ -597,15 +598,17 @@ def extract(
     """Enumerate all symmetries: grow from every source sample and peak, merge, rank.
 
     Seeds are taken strongest first; a seed (s, t) is skipped when an earlier part
-    already maps s within ``peak_radius`` of t. With ``unary``, the peaks of the unary
-    seed further parts, grown on the unary, after all those of the marginals: loopy BP
-    can settle a marginal with several symmetric modes on one of them (on a five-armed
-    star, 60 / 600 samples, the extraction from the marginals alone found 5 of the 20
-    arm pairs, with the unary's peaks 17). Every part is scored on the marginals. Parts smaller than ``min_fraction``
-    of |Ps| are dropped, the others merged into maps
-    (identity and non-identity parts separately, so that the two never fuse where they
-    coincide, e.g. on a mirror plane), and the best-ranked non-identity map covering
-    at least ``global_fraction`` of the source samples is the global one.
+    already maps s within ``peak_radius`` of t. With ``unary`` (and
+    ``params.unary_seeds``), the peaks of the unary seed further parts, grown on the
+    unary, after all those of the marginals: loopy BP can settle a marginal with several
+    symmetric modes on one of them (on a five-armed star, 60 / 600 samples, the
+    extraction from the marginals alone found 5 of the 20 arm pairs, with the unary's
+    peaks 17). Every part is scored on the marginals. Parts smaller than
+    ``min_fraction`` of |Ps| are dropped, the others merged into maps (identity and
+    non-identity parts separately, so that the two never fuse where they coincide, e.g.
+    on a mirror plane; the unary's parts only where they add a map), and the
+    best-ranked non-identity map covering at least ``global_fraction`` of the source
+    samples is the global one.
 
     Parameters
     ----------
@@ -616,6 +619,7 @@ def extract(
     self_target : (S,) int64, optional
         See :func:`query`.
     unary : (S, T) array, optional
+        The unary potentials, for the extra seeds.
 
     Returns
     -------
@@ -624,7 +628,7 @@ def extract(
     p = params
     norm = normalise_rows(marginals)
     n_s = norm.shape[0]
-    fields = _fields(norm, unary)
+    fields = _fields(norm, unary, p)
     seeds = [(k, -float(field[s, t]), s, int(t)) for k, field in enumerate(fields) for s in range(n_s)
              for t in peaks(field[s], targets, p.threshold, p.peak_radius)[: p.seeds_per_sample]]
     seeds.sort()
@@ -708,7 +712,6 @@ def from_result(
     unary : (S, T) array, optional
         Also seed from the unary's peaks (:func:`extract`) when ``params.unary_seeds``.
     """
-    unary = unary if params.unary_seeds else None
     graph = SourceGraph.from_edges(edges, support.edge_length, len(marginals))
     self_target = nearest_targets(source_points, target_points) if support.self_match else None
     if source is not None:
