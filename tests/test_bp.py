@@ -14,6 +14,7 @@ from intrinsym.bp import (
     incoming_edges,
     resolve_backend,
     schedule_steps,
+    active_steps,
     serial_orders,
     visiting_orders,
     colour_classes,
@@ -83,6 +84,41 @@ def test_sparse_equals_dense_oracle(schedule, n_source, n_target, k, iters):
     assert np.abs(sparse.marginals - 1.0 / n_target).max() > 1e-4
 
 
+def test_residual_schedule_matches_oracle_and_saves_updates():
+    mrf, d_tt = sphere_problem(40, 300, 4, seed=300)
+    kw = dict(iterations=60, tol=1e-6, seed=3)
+    sparse = belief_propagation(mrf, schedule="residual", dtype=np.float64, **kw)
+    dense = belief_propagation_dense(
+        mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, schedule="residual", **kw
+    )
+    colour = belief_propagation(mrf, schedule="colour", dtype=np.float64, **kw)
+    assert sparse.converged and colour.converged
+    # the oracle skips exactly the same nodes
+    assert sparse.updates == dense.updates
+    assert np.abs(sparse.marginals - dense.marginals).max() < 1e-6
+    # every message in the first iteration, fewer later, fewer in all than colour
+    assert sparse.updates[0] == colour.updates[0] == 2 * len(mrf.edges)
+    assert min(sparse.updates) < 2 * len(mrf.edges)
+    assert sum(sparse.updates) < sum(colour.updates)
+    # the same fixed point, up to the tolerance
+    assert np.abs(sparse.marginals - colour.marginals).max() < 1e-4 * sparse.marginals.max()
+
+
+def test_active_steps_keeps_the_sends_of_active_nodes():
+    """The 6-cycle with chord 0-2 (colours 0 2 1 0 1 2): batch 0 is nodes 0 and 3."""
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 0], [0, 2]])
+    ptr, directed = incoming_edges(edges, 6)
+    steps = schedule_steps("colour", visiting_orders("colour", edges, 6, 1, 0)[0], edges, ptr, directed)
+    assert steps.node[: steps.batch[1]].tolist() == [0, 3]
+    active = np.array([False, True, True, True, True, True])
+    part = active_steps(steps, 0, active)
+    assert part.node.tolist() == [3]
+    # 3 -> 2 is edge 2 reversed (5), 3 -> 4 is edge 3 (6)
+    assert sorted(part.out.tolist()) == [5, 6]
+    assert part.ptr.tolist() == [0, 2] and part.batch.tolist() == [0, 1]
+    assert len(active_steps(steps, 0, np.zeros(6, dtype=bool)).out) == 0
+
+
 def test_damped_flooding_matches_oracle():
     mrf, d_tt = sphere_problem(20, 400, 3, seed=1)
     kw = dict(schedule="flooding", iterations=4, tol=0.0, damping=0.5, seed=0)
@@ -130,7 +166,7 @@ def test_tree_marginals_equal_brute_force():
     joint /= joint.sum()
     exact = np.array([joint.sum(axis=tuple(a for a in range(5) if a != s)) for s in range(5)])
 
-    for schedule in ("serial", "colour", "flooding"):
+    for schedule in ("serial", "colour", "residual", "flooding"):
         res = belief_propagation(mrf, schedule=schedule, iterations=50, tol=1e-12, dtype=np.float64)
         assert res.converged
         assert np.abs(res.marginals - exact).max() < 1e-9
@@ -211,7 +247,12 @@ def test_bad_arguments():
 def test_weight_polynomial_matches_exp(rho, tol):
     t = np.linspace(0.0, 1.0, 10001)
     exact = np.exp(-np.log(1 / rho**2) * t) - rho**2
-    assert np.abs(np.polynomial.polynomial.polyval(t, weight_polynomial(1.0, rho)) - exact).max() < tol
+    assert np.abs(np.polynomial.polynomial.polyval(t, weight_polynomial(rho)) - exact).max() < tol
+    # float32 storage asks only for its epsilon, with fewer terms
+    eps = float(np.finfo(np.float32).eps)
+    coarse = weight_polynomial(rho, eps)
+    assert np.abs(np.polynomial.polynomial.polyval(t, coarse) - exact).max() <= eps
+    assert len(coarse) < len(weight_polynomial(rho))
 
 
 def test_backend_choice():

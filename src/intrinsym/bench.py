@@ -141,9 +141,10 @@ def message_timing(
     steps = bp.schedule_steps("flooding", np.arange(n_s), mrf.edges, ptr, directed)
     read = np.ones((n_dir, n_t), dtype=np.float32)
     write = read.copy()
-    sweep(read, write, steps)  # compile
+    moved = np.zeros(n_dir)
+    sweep(read, write, steps, moved)  # compile
     t0 = time.perf_counter()
-    sweep(read, write, steps)
+    sweep(read, write, steps, moved)
     sparse_s = (time.perf_counter() - t0) / max(1, n_dir)
     rng = np.random.default_rng(seed)
     outs = rng.choice(n_dir, size=min(n_messages, n_dir), replace=False)

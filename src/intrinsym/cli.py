@@ -33,7 +33,7 @@ MODEL_OPTIONS = [
     ("--rho", "rho", float, f"pairwise truncation rho of Eq. 6 (default and paper: {D.rho})"),
     ("--tolerance", "tolerance", float, f"pairwise ring half-width delta in target spacings; sets lambda (default {D.tolerance})"),
     ("--lambda", "lam", float, "raw lambda of Eq. 6 in 1/(input length unit)^2; overrides --tolerance (paper: 1e6 in its units)"),
-    ("--schedule", "schedule", str, f"BP message schedule: colour (serial, independent updates batched), serial (paper) or flooding (default {D.schedule})"),
+    ("--schedule", "schedule", str, f"BP message schedule: colour (serial, independent updates batched), serial (paper), residual (colour, a node sends only while its inputs change) or flooding (default {D.schedule})"),
     ("--iterations", "iterations", int, f"maximum BP iterations T (default and paper: {D.iterations})"),
     ("--bp-tol", "bp_tol", float, f"stop BP when the largest message change is below this (default {D.bp_tol})"),
     ("--damping", "damping", float, f"message damping in [0, 1) (default {D.damping})"),

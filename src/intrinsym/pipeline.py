@@ -78,10 +78,11 @@ class Params:
     lam : float or None
         Raw lambda of Eq. 6 in 1 / (input length unit)^2 (paper: 1e6 in its units);
         overrides ``tolerance``. Not scale-free, by definition.
-    schedule : {"serial", "colour", "flooding"}
+    schedule : {"serial", "colour", "residual", "flooding"}
         BP message schedule (:func:`intrinsym.bp.belief_propagation`). "colour" (default)
         is a serial schedule whose independent updates run as one batch; "serial" is the
-        paper's node-by-node sweeps.
+        paper's node-by-node sweeps; "residual" is "colour" that lets a node send only
+        while its inputs still change; "flooding" updates all messages at once.
     iterations : int
         Maximum BP iterations T (paper: 100).
     bp_tol : float
