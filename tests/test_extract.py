@@ -21,6 +21,7 @@ from intrinsym.extract import (
     normalise_rows,
     peaks,
     query,
+    refine,
     vertex_map,
 )
 from intrinsym.geodesics import SparseDistances
@@ -242,3 +243,24 @@ def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
     report = json.loads((out / "scores.json").read_text())
     assert set(report["map"]["segmentation"]) == {"1", "2", "3", "4", "5"}
     assert (out / "curve.png").is_file()
+
+
+def test_refine_trilaterates_misplaced_samples():
+    p = ExtractParams(d_error=0.03)
+    assert refine(GRAPH, TARGETS, MIRROR, p, min_neighbours=2).tolist() == MIRROR.tolist()
+    # sample 3 placed 0.05 off its image: its neighbours' images put it back
+    slid = MIRROR.copy()
+    slid[3] = (MIRROR[3] - 2) % T
+    assert refine(GRAPH, TARGETS, slid, p, min_neighbours=2).tolist() == MIRROR.tolist()
+    # a mirror with fixed points (samples 0 and 5 on the axis through targets 0 and 20):
+    # the removed trivial match pushes sample 0 off the axis; refining returns it
+    fixed = (-4 * np.arange(S)) % T
+    pushed = fixed.copy()
+    pushed[0] = 4
+    assert refine(GRAPH, TARGETS, pushed, p, min_neighbours=2).tolist() == fixed.tolist()
+    # every sample has two neighbours: with three required nothing moves
+    assert refine(GRAPH, TARGETS, pushed, p).tolist() == pushed.tolist()
+    # unmapped samples stay unmapped and do not vote
+    holes = slid.copy()
+    holes[[2, 4]] = -1
+    assert refine(GRAPH, TARGETS, holes, p, min_neighbours=2).tolist() == holes.tolist()

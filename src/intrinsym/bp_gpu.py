@@ -116,4 +116,4 @@ def belief_propagation_gpu(
     history, seconds, converged = iterate(update, iterations, tol, progress)
     b = node_products()
     marg = cp.asnumpy((b / b.sum(axis=1, keepdims=True)).astype(cp.float32))
-    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup)
+    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history))
