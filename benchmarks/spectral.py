@@ -12,6 +12,10 @@ geodesic, and the mean error)::
 Prints a markdown table (``--json``: one JSON object per shape instead). ``seconds`` is
 the wall time of ``spectral_symmetry`` alone (eigenpairs included, loading and scoring
 not). Skips (exit 0, a message) when the data folder is absent.
+
+The baseline makes many small matrix products; on a machine whose cores are busy with
+other work, OpenBLAS threads waiting on each other made it several times slower, so
+the README's numbers were taken with ``OPENBLAS_NUM_THREADS=1``.
 """
 
 from __future__ import annotations

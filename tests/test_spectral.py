@@ -25,14 +25,6 @@ def test_isolated_eigenvalues_by_hand():
     assert spectral.isolated_eigenvalues(evals, 8, min_gap=0.0).tolist() == [0, 1, 2, 3, 4, 5]
 
 
-def test_nearest_matches_a_kd_tree():
-    rng = np.random.default_rng(1)
-    points, queries = rng.standard_normal((300, 12)), rng.standard_normal((50, 12))
-    distance, index = spectral.nearest(queries, points, chunk=1000)  # several blocks
-    d_ref, i_ref = cKDTree(points).query(queries)
-    assert np.array_equal(index, i_ref) and np.allclose(distance, d_ref)
-
-
 def test_sign_search_finds_the_planted_flip():
     # a point set symmetric under flipping its 2nd and 4th coordinates only
     rng = np.random.default_rng(2)
@@ -40,9 +32,9 @@ def test_sign_search_finds_the_planted_flip():
     points = np.vstack([half, half * [1, -1, 1, -1, 1]])
     signs, residuals = spectral.sign_candidates(points, 3)
     assert signs.shape == (3, 5) and signs[0].tolist() == [1, -1, 1, -1, 1]
-    assert residuals[0] < 1e-6 and residuals[1] > 0.1  # 0 up to rounding in |a|^2 + |b|^2 - 2 a.b
-    with pytest.raises(ValueError, match="1 to 16"):
-        spectral.sign_candidates(np.zeros((4, 17)), 1)
+    assert residuals[0] == 0.0 and residuals[1] > 0.1
+    with pytest.raises(ValueError, match="1 to 12"):
+        spectral.sign_candidates(np.zeros((4, 13)), 1)
 
 
 def test_distortion_is_zero_for_isometries_only():

@@ -47,7 +47,7 @@ from scipy.spatial.distance import pdist
 
 from . import descriptors, sampling
 
-__all__ = ["distortion", "isolated_eigenvalues", "nearest", "sign_candidates", "spectral_symmetry", "zoomout"]
+__all__ = ["distortion", "isolated_eigenvalues", "sign_candidates", "spectral_symmetry", "zoomout"]
 
 
 def isolated_eigenvalues(evals: np.ndarray, count: int, min_gap: float = 0.05) -> np.ndarray:
@@ -76,42 +76,6 @@ def isolated_eigenvalues(evals: np.ndarray, count: int, min_gap: float = 0.05) -
     return np.flatnonzero((left >= min_gap) & (right >= min_gap))[:count].astype(np.int64)
 
 
-def nearest(queries: np.ndarray, points: np.ndarray, chunk: int = 2**22) -> tuple[np.ndarray, np.ndarray]:
-    """Euclidean nearest neighbour of every query among the points, by brute force.
-
-    A matrix product per block of queries: in the tens of dimensions of a spectral
-    embedding this is several times faster than a k-d tree.
-
-    Parameters
-    ----------
-    queries : (Q, d) float array
-    points : (P, d) float array
-    chunk : int
-        Largest number of query-point distances held at once.
-
-    Returns
-    -------
-    distance : (Q,) float64
-        Distance to the nearest point (the unit of the coordinates).
-    index : (Q,) int64
-        Row of the nearest point.
-    """
-    q = np.asarray(queries, dtype=np.float64)
-    p = np.asarray(points, dtype=np.float64)
-    p_sq = np.sum(p**2, axis=1)
-    index = np.empty(len(q), dtype=np.int64)
-    distance = np.empty(len(q))
-    step = max(1, chunk // max(len(p), 1))
-    for lo in range(0, len(q), step):
-        block = q[lo : lo + step]
-        # |x - y|^2 = |x|^2 + |y|^2 - 2 x.y; |x|^2 does not change the argmin
-        d2 = p_sq[None, :] - 2.0 * block @ p.T
-        index[lo : lo + step] = np.argmin(d2, axis=1)
-        best = d2[np.arange(len(block)), index[lo : lo + step]] + np.sum(block**2, axis=1)
-        distance[lo : lo + step] = np.sqrt(np.maximum(best, 0.0))
-    return distance, index
-
-
 def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarray, np.ndarray]:
     """Sign vectors whose flipped embedding best matches the embedding, best first.
 
@@ -122,7 +86,7 @@ def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarra
     ----------
     embedding : (S, m) float array
         Eigenfunctions of non-repeated eigenvalues (columns) at evenly spread points,
-        1 <= m <= 16.
+        1 <= m <= 12 (all 2^m - 1 flipped copies are queried at once).
     n_candidates : int
         How many sign vectors to return.
 
@@ -136,15 +100,12 @@ def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarra
     """
     points = np.asarray(embedding, dtype=np.float64)
     m = points.shape[1]
-    if not 1 <= m <= 16:
-        raise ValueError(f"the sign search needs 1 to 16 eigenfunctions, got {m}")
+    if not 1 <= m <= 12:
+        raise ValueError(f"the sign search needs 1 to 12 eigenfunctions, got {m}")
     bits = np.arange(1, 2**m)
     signs = 1.0 - 2.0 * ((bits[:, None] >> np.arange(m)) & 1)
-    # many sign vectors per matrix product: few, large BLAS calls
-    groups = np.array_split(signs, max(1, len(signs) * len(points) // 2**16))
-    residuals = np.concatenate(
-        [nearest((points * g[:, None]).reshape(-1, m), points)[0].reshape(len(g), -1).mean(axis=1) for g in groups]
-    )
+    distance = cKDTree(points).query((points * signs[:, None]).reshape(-1, m))[0]
+    residuals = distance.reshape(len(signs), -1).mean(axis=1)
     best = np.argsort(residuals, kind="stable")[:n_candidates]
     return signs[best], residuals[best]
 
@@ -181,14 +142,13 @@ def zoomout(
     src = np.asarray(source, dtype=np.float64)
     tgt = np.asarray(target, dtype=np.float64)
     images = np.asarray(images, dtype=np.int64)
-    # source[:, :k] = Q[:, :k] R[:k, :k] for every k: one QR serves all the levels
     # source[:, :k] = Q[:, :k] R[:k, :k] for every k, and the leading block of the
     # triangular R^-1 is the inverse of R's: one QR serves all the levels
     q, r = np.linalg.qr(src)
     r_inv = solve_triangular(r, np.eye(len(r)))
     for k in range(k_start, src.shape[1] + 1):
         C = r_inv[:k, :k] @ (q[:, :k].T @ tgt[images, :k])
-        images = nearest(src[:, :k] @ C, tgt[:, :k])[1]
+        images = cKDTree(tgt[:, :k]).query(src[:, :k] @ C)[1]
     return images.astype(np.int64), C
 
 
@@ -237,10 +197,10 @@ def spectral_symmetry(
     vertices : (N, 3) float array
         Positions, any length unit.
     faces : (F, 3) int array or None
-        Triangles (every vertex in one; see :func:`intrinsym.mesh.clean`); None for a
-        point cloud.
+        Triangles of a connected surface (every vertex in one; see
+        :func:`intrinsym.mesh.clean`); None for a point cloud.
     n_signs : int
-        Eigenfunctions in the sign search (2^n_signs - 1 sign vectors), at most 16.
+        Eigenfunctions in the sign search (2^n_signs - 1 sign vectors), at most 12.
     n_final : int
         Eigenfunctions (besides the constant) of the last ZoomOut level, < N.
     n_candidates : int
@@ -281,9 +241,10 @@ def spectral_symmetry(
     samples = targets[:n_samples]
     signs, _ = sign_candidates(samples[:, chosen], n_candidates)
     commute = targets / np.sqrt(evals[1:])
+    tree = cKDTree(targets[:, chosen])
     best, best_distortion = None, np.inf
     for s in signs:
-        images = nearest(samples[:, chosen] * s, targets[:, chosen])[1]
+        images = tree.query(samples[:, chosen] * s)[1]
         images, C = zoomout(samples, targets, images, int(chosen[-1]) + 1)
         # back to all-plus on the sign-search eigenfunctions: ZoomOut fell into the
         # identity, whose distortion is zero
