@@ -13,9 +13,11 @@ Prints a markdown table (``--json``: one JSON object per shape instead). ``secon
 the wall time of ``spectral_symmetry`` alone (eigenpairs included, loading and scoring
 not). Skips (exit 0, a message) when the data folder is absent.
 
-The baseline makes many small matrix products; on a machine whose cores are busy with
-other work, OpenBLAS threads waiting on each other made it several times slower, so
-the README's numbers were taken with ``OPENBLAS_NUM_THREADS=1``.
+On a machine whose cores are busy with other work, OpenBLAS threads waiting on each
+other slow the eigensolver and ZoomOut's small matrix products down (measured back to
+back on the 2-core development machine while other jobs ran: michael1 25.8 s with the
+default threads, 14.8 s with one; wolf0 4.9 s and 1.6 s), so the README's numbers were
+taken with ``OPENBLAS_NUM_THREADS=1``.
 """
 
 from __future__ import annotations
