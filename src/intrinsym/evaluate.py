@@ -244,8 +244,12 @@ def load_labels(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     return values.astype(np.int64)
 
 
-def map_errors(predicted: np.ndarray, truth: np.ndarray, graph, chunk: int = 256) -> np.ndarray:
+def map_errors(predicted: np.ndarray, truth: np.ndarray, graph) -> np.ndarray:
     """Geodesic distance between predicted and true image of every vertex.
+
+    One Dijkstra per distinct predicted vertex, stopped once the true images of all
+    vertices mapped there are settled (:func:`geodesics.pair_distances`), so a dense
+    map with small errors costs little more than a map extended from a few samples.
 
     Parameters
     ----------
@@ -255,8 +259,6 @@ def map_errors(predicted: np.ndarray, truth: np.ndarray, graph, chunk: int = 256
         True image vertex.
     graph : (N, N) sparse
         Geodesic graph (:func:`geodesics.surface_graph`) of the shape, in sqrt(area) units.
-    chunk : int
-        Distinct predicted vertices per Dijkstra batch.
 
     Returns
     -------
@@ -267,12 +269,7 @@ def map_errors(predicted: np.ndarray, truth: np.ndarray, graph, chunk: int = 256
     true = np.asarray(truth, dtype=np.int64)
     err = np.full(len(pred), np.inf)
     has = np.flatnonzero(pred >= 0)
-    # a map extended from samples takes few distinct values: one Dijkstra per value
-    sources, inverse = np.unique(pred[has], return_inverse=True)
-    for lo in range(0, len(sources), chunk):
-        rows = geodesics.distances_from(graph, sources[lo : lo + chunk])
-        pick = (inverse >= lo) & (inverse < lo + chunk)
-        err[has[pick]] = rows[inverse[pick] - lo, true[has[pick]]]
+    err[has] = geodesics.pair_distances(graph, np.column_stack([pred[has], true[has]]))
     return err
 
 

@@ -1,0 +1,258 @@
+"""Spectral baseline: the dominant intrinsic self-symmetry from Laplace-Beltrami eigenfunctions.
+
+Not the paper's method: a comparison for the global map that :mod:`intrinsym.extract`
+reads off the BP marginals (issue 4). Two published steps:
+
+1. Sign search (Ovsjanikov, Sun and Guibas, "Global intrinsic symmetries of shapes",
+   SGP 2008). An intrinsic symmetry ``T`` maps every eigenfunction of a non-repeated
+   eigenvalue onto itself or its negative, ``phi_i o T = s_i phi_i``. Among the sign
+   vectors ``s`` other than all-plus (the identity), the ones whose sign-flipped spectral
+   embedding ``s * phi(x)`` lands closest to the unflipped embedding (mean
+   nearest-neighbour distance over evenly spread samples) are the candidates.
+2. ZoomOut (Melzi et al., "ZoomOut: spectral upsampling for efficient shape
+   correspondence", SIGGRAPH Asia 2019), used as a self-map: alternate the functional
+   map ``C`` of the point map in the first ``k`` eigenfunctions (least squares,
+   ``phi_k[T(x)] ~ phi_k[x] C``) and the point map ``T(x)`` = nearest neighbour of
+   ``phi_k[x] C``, growing ``k`` by one each time. It iterates on farthest-point
+   samples; the last ``C`` then maps every vertex.
+
+Near-repeated eigenvalues: within a cluster of (nearly) equal eigenvalues a symmetry
+acts by an orthogonal mixing, not by a sign, so the sign search uses only eigenfunctions
+whose eigenvalue lies at least ``min_gap`` (relative) from both neighbours; ZoomOut
+estimates the full ``C`` and handles the clusters.
+
+Choosing among candidates: several near-symmetries can tie in the sign search on the
+first eigenfunctions (a human is nearly front/back symmetric at low frequencies, so
+left/right, front/back and their composition come out within a factor of three), and
+the nearest-neighbour residual does not penalise a map that folds the shape onto part
+of itself. So the best ``n_candidates`` sign vectors are all refined, and the refined
+map that best keeps the commute-time distances ``|phi(x)/sqrt(lambda) -
+phi(y)/sqrt(lambda)|`` (which an intrinsic isometry preserves exactly) wins. A candidate
+that ZoomOut turns back into all-plus signs on the sign-search eigenfunctions has become
+the identity (zero distortion) and is dropped.
+
+Everything is scale-free (eigenvalue gaps and distortions are relative, nearest
+neighbours do not depend on the embedding's scale) and deterministic (fixed start
+vector for the eigensolver, fixed farthest-point seed). An exactly symmetric shape with
+several symmetries (an ellipsoid with three distinct axes) ties between them, and which
+one is returned may then change with rounding (for example when the shape is scaled).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import solve_triangular
+from scipy.spatial import cKDTree
+from scipy.spatial.distance import pdist
+
+from . import descriptors, sampling
+
+__all__ = ["distortion", "isolated_eigenvalues", "sign_candidates", "spectral_symmetry", "zoomout"]
+
+
+def isolated_eigenvalues(evals: np.ndarray, count: int, min_gap: float = 0.05) -> np.ndarray:
+    """The first ``count`` eigenvalues separated from both neighbours by ``min_gap``.
+
+    Parameters
+    ----------
+    evals : (K,) float array
+        Ascending positive eigenvalues (the constant mode left out), any unit.
+    count : int
+        How many to return at most.
+    min_gap : float
+        Smallest relative gap ``|lambda_j - lambda_i| / max(lambda_i, lambda_j)`` to the
+        previous and the next eigenvalue. The last one has no known next neighbour and
+        is never chosen.
+
+    Returns
+    -------
+    (m,) int64
+        Indices into ``evals``, ascending, ``m <= count``.
+    """
+    lam = np.asarray(evals, dtype=np.float64)
+    gap = np.diff(lam) / lam[1:]
+    left = np.r_[np.inf, gap]
+    right = np.r_[gap, -np.inf]
+    return np.flatnonzero((left >= min_gap) & (right >= min_gap))[:count].astype(np.int64)
+
+
+def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sign vectors whose flipped embedding best matches the embedding, best first.
+
+    Every sign vector in ``{-1, +1}^m`` except all-plus is tried: the residual of ``s``
+    is the mean over the points ``x`` of ``min_y |s * E[x] - E[y]|``.
+
+    Parameters
+    ----------
+    embedding : (S, m) float array
+        Eigenfunctions of non-repeated eigenvalues (columns) at evenly spread points,
+        1 <= m <= 12 (all 2^m - 1 flipped copies are queried at once).
+    n_candidates : int
+        How many sign vectors to return.
+
+    Returns
+    -------
+    signs : (n, m) float64
+        Sign vectors (entries +-1), smallest residual first, ``n = min(n_candidates,
+        2^m - 1)``.
+    residuals : (n,) float64
+        Their residuals, in the embedding's unit.
+    """
+    points = np.asarray(embedding, dtype=np.float64)
+    m = points.shape[1]
+    if not 1 <= m <= 12:
+        raise ValueError(f"the sign search needs 1 to 12 eigenfunctions, got {m}")
+    bits = np.arange(1, 2**m)
+    signs = 1.0 - 2.0 * ((bits[:, None] >> np.arange(m)) & 1)
+    distance = cKDTree(points).query((points * signs[:, None]).reshape(-1, m))[0]
+    residuals = distance.reshape(len(signs), -1).mean(axis=1)
+    best = np.argsort(residuals, kind="stable")[:n_candidates]
+    return signs[best], residuals[best]
+
+
+def zoomout(
+    source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """ZoomOut refinement of a point map between two sets of basis rows.
+
+    For ``k = k_start, ..., K``: ``C`` (k, k) is the least-squares solution of
+    ``target[images, :k] ~ source[:, :k] C``, then every source row's image becomes the
+    target row nearest to ``source[:, :k] C``. For a self-map, ``source`` and ``target``
+    are the eigenfunctions at two vertex subsets of the same shape.
+
+    Parameters
+    ----------
+    source : (S, K) float array
+        Basis (eigenfunctions, ascending eigenvalue, constant mode left out) at the
+        points being mapped, S >= K.
+    target : (T, K) float array
+        The same basis at the candidate images.
+    images : (S,) int array
+        Initial image (row of ``target``) of every source row.
+    k_start : int
+        Number of basis functions of the first iteration, 1 <= k_start <= K.
+
+    Returns
+    -------
+    images : (S,) int64
+        Refined image (row of ``target``) of every source row.
+    C : (K, K) float64
+        Functional map of the last iteration.
+    """
+    src = np.asarray(source, dtype=np.float64)
+    tgt = np.asarray(target, dtype=np.float64)
+    images = np.asarray(images, dtype=np.int64)
+    # source[:, :k] = Q[:, :k] R[:k, :k] for every k, and the leading block of the
+    # triangular R^-1 is the inverse of R's: one QR serves all the levels
+    q, r = np.linalg.qr(src)
+    r_inv = solve_triangular(r, np.eye(len(r)))
+    for k in range(k_start, src.shape[1] + 1):
+        C = r_inv[:k, :k] @ (q[:, :k].T @ tgt[images, :k])
+        images = cKDTree(tgt[:, :k]).query(src[:, :k] @ C)[1]
+    return images.astype(np.int64), C
+
+
+def distortion(embedding: np.ndarray, images: np.ndarray) -> float:
+    """How far a point map is from preserving the distances of an embedding.
+
+    Parameters
+    ----------
+    embedding : (S, K) float array
+        Embedded points, e.g. the commute-time embedding ``phi_i / sqrt(lambda_i)``
+        whose distances an intrinsic isometry preserves.
+    images : (S, K) float array
+        The embedded images of the same points.
+
+    Returns
+    -------
+    float
+        Mean ``| |e_x - e_y| - |i_x - i_y| |`` over all pairs relative to the mean
+        ``|e_x - e_y|`` (dimensionless, 0 for an isometry of the embedding).
+    """
+    before = pdist(np.asarray(embedding, dtype=np.float64))
+    after = pdist(np.asarray(images, dtype=np.float64))
+    return float(np.abs(after - before).mean() / before.mean())
+
+
+def spectral_symmetry(
+    vertices: np.ndarray,
+    faces: np.ndarray | None,
+    n_signs: int = 8,
+    n_final: int = 50,
+    n_candidates: int = 4,
+    n_samples: int = 500,
+    n_targets: int = 3000,
+    min_gap: float = 0.05,
+) -> np.ndarray:
+    """The dominant non-identity intrinsic self-symmetry as a vertex map.
+
+    Sign search over the first ``n_signs`` eigenfunctions of non-repeated eigenvalue on
+    ``n_samples`` farthest-point samples, ZoomOut of the best ``n_candidates`` sign
+    vectors from those samples into ``n_targets`` farthest-point samples up to
+    ``n_final`` eigenfunctions, and the point map of the least distorted one (see the
+    module docstring) for every vertex.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+        Positions, any length unit.
+    faces : (F, 3) int array or None
+        Triangles of a connected surface (every vertex in one; see
+        :func:`intrinsym.mesh.clean`); None for a point cloud.
+    n_signs : int
+        Eigenfunctions in the sign search (2^n_signs - 1 sign vectors), at most 12.
+    n_final : int
+        Eigenfunctions (besides the constant) of the last ZoomOut level, < N.
+    n_candidates : int
+        Sign vectors refined by ZoomOut.
+    n_samples : int
+        Points of the sign search and of ZoomOut's least squares, at least ``n_final``
+        (or all N vertices).
+    n_targets : int
+        Candidate images during ZoomOut (the first ``n_samples`` of them are the
+        samples); the final map uses every vertex.
+    min_gap : float
+        Smallest relative eigenvalue gap of an eigenfunction in the sign search
+        (:func:`isolated_eigenvalues`).
+
+    Returns
+    -------
+    (N,) int64
+        Image of every vertex.
+
+    Raises
+    ------
+    ValueError
+        If no eigenvalue below ``n_final`` is isolated by ``min_gap``, the sizes are out
+        of range, or every candidate refines to the identity (no symmetry found).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    n_targets = min(max(n_targets, n_samples), len(v))
+    n_samples = min(n_samples, n_targets)
+    if n_samples < n_final:
+        raise ValueError(f"n_samples ({n_samples}) must be at least n_final ({n_final})")
+    evals, evecs = descriptors.eigenpairs(v, faces, n_final + 1)
+    phi = evecs[:, 1:]
+    chosen = isolated_eigenvalues(evals[1:], n_signs, min_gap)
+    if len(chosen) == 0:
+        raise ValueError(f"no eigenvalue among the first {n_final} is isolated by {min_gap}")
+    # farthest-point sampling is greedy: the first n_samples targets are the samples
+    targets = phi[sampling.farthest_point_sampling(v, n_targets)]
+    samples = targets[:n_samples]
+    signs, _ = sign_candidates(samples[:, chosen], n_candidates)
+    commute = targets / np.sqrt(evals[1:])
+    tree = cKDTree(targets[:, chosen])
+    best, best_distortion = None, np.inf
+    for s in signs:
+        images = tree.query(samples[:, chosen] * s)[1]
+        images, C = zoomout(samples, targets, images, int(chosen[-1]) + 1)
+        # back to all-plus on the sign-search eigenfunctions: ZoomOut fell into the
+        # identity, whose distortion is zero
+        if np.all(np.diag(C)[chosen] > 0):
+            continue
+        score = distortion(commute[:n_samples], commute[images])
+        if score < best_distortion:
+            best, best_distortion = C, score
+    if best is None:
+        raise ValueError(f"all {len(signs)} candidate sign vectors refine to the identity")
+    return cKDTree(phi).query(phi @ best)[1].astype(np.int64)
