@@ -261,15 +261,21 @@ def _peaks(row, t_ptr, t_idx, t_dist, threshold, radius):
 
 
 @nb.njit(cache=True)
-def _support(image, n, candidate, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error):
-    """How many mapped neighbours k of n keep |d_T(f(k), candidate) - d_S(k, n)| < d_error."""
+def _fit(image, n, candidate, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap):
+    """How candidate fits as the image of n, over the mapped neighbours k of n.
+
+    Returns the number of them with |d_T(f(k), candidate) - d_S(k, n)| < d_error, and
+    the sum of min(|d_T(f(k), candidate) - d_S(k, n)|, cap)^2 (cap >= d_error).
+    """
     count = 0
+    total = 0.0
     for e in range(g_ptr[n], g_ptr[n + 1]):
         k = g_nbr[e]
         if image[k] >= 0:
-            d = _find(t_ptr, t_idx, t_dist, image[k], candidate, g_len[e] + d_error)
-            count += abs(d - g_len[e]) < d_error
-    return count
+            r = abs(_find(t_ptr, t_idx, t_dist, image[k], candidate, g_len[e] + cap) - g_len[e])
+            count += r < d_error
+            total += min(r, cap) ** 2
+    return count, total
 
 
 @nb.njit(cache=True)
@@ -315,8 +321,8 @@ def _grow(norm, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, threshold, d_error, m
             for c in range(n_cand):
                 value = norm[n, cand[c]]
                 # support >= 1 (the parent) always; it only ranks several candidates
-                support = 1 if n_cand == 1 and min_support == 1 else _support(
-                    image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error)
+                support = 1 if n_cand == 1 and min_support == 1 else _fit(
+                    image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, d_error)[0]
                 if support < min_support:
                     continue
                 if support > best_support or (support == best_support and value >= best_value):
@@ -329,23 +335,11 @@ def _grow(norm, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, threshold, d_error, m
 
 
 @nb.njit(cache=True)
-def _distortion(image, n, candidate, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, cap):
-    """Sum over the mapped neighbours k of n of min(|d_T(f(k), candidate) - d_S(k, n)|, cap)^2."""
-    total = 0.0
-    for e in range(g_ptr[n], g_ptr[n + 1]):
-        k = g_nbr[e]
-        if image[k] >= 0:
-            d = _find(t_ptr, t_idx, t_dist, image[k], candidate, g_len[e] + cap)
-            total += min(abs(d - g_len[e]), cap) ** 2
-    return total
-
-
-@nb.njit(cache=True)
 def _refine(image, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, min_neighbours, passes):
     """Move the inconsistent samples of a map to the target that best keeps their edge lengths.
 
-    A sample n is inconsistent when the :func:`_distortion` of its image (residuals
-    capped at 3 d_error) exceeds d_error^2 per mapped neighbour; samples that agree with
+    A sample n is inconsistent when the distortion of its image (:func:`_fit`,
+    residuals capped at 3 d_error) exceeds d_error^2 per mapped neighbour; samples that agree with
     their neighbours stay (moving them too cost 0.7 points of the global map within
     0.10 on TOSCA wolf1). Candidates for n are the targets at d_S(k, n) +- d_error from
     the image of each mapped neighbour k; n moves to the one of least distortion when
@@ -365,7 +359,7 @@ def _refine(image, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, min_neigh
             if mapped < min_neighbours:
                 continue
             best = image[n]
-            best_cost = _distortion(image, n, best, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, cap)
+            best_cost = _fit(image, n, best, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap)[1]
             current = best_cost
             if current <= mapped * d_error**2:
                 continue
@@ -378,7 +372,7 @@ def _refine(image, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, min_neigh
                 lo = row_lo + np.searchsorted(ring, g_len[e] - d_error, "right")
                 hi = row_lo + np.searchsorted(ring, g_len[e] + d_error, "left")
                 for j in range(lo, hi):
-                    cost = _distortion(image, n, t_idx[j], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, cap)
+                    cost = _fit(image, n, t_idx[j], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap)[1]
                     if cost < best_cost:
                         best, best_cost = t_idx[j], cost
             if best != image[n] and best_cost < 0.5 * current:
