@@ -60,6 +60,14 @@ def test_deterministic_for_a_seed(spot, spot_result):
     assert not np.array_equal(other.source_vertex, spot_result.source_vertex)
 
 
+def test_residual_schedule_end_to_end(spot, spot_result):
+    res = intrinsym.detect(spot, schedule="residual", **dict(SMALL, iterations=100))
+    colour = intrinsym.detect(spot, **dict(SMALL, iterations=100))
+    assert res.info["bp"]["converged"] and colour.info["bp"]["converged"]
+    assert res.info["bp"]["message_updates"] < colour.info["bp"]["message_updates"]
+    assert np.abs(res.marginals - colour.marginals).max() < 1e-3 * colour.marginals.max()
+
+
 def test_scale_free(spot, spot_result):
     big = Shape(spot.vertices * 1000.0 + 5.0, spot.faces)
     r = intrinsym.detect(big, **SMALL)

@@ -579,6 +579,7 @@ def _solve(
             "history": res.history,
             "seconds_per_iteration": float(np.mean(res.seconds)),
             "setup_seconds": res.setup_seconds,
+            "message_updates": int(sum(res.updates)),
         },
         "versions": _versions(),
     }
