@@ -158,8 +158,8 @@ def arm_matrix(result: intrinsym.Result, source_labels: np.ndarray, target_label
 def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: np.ndarray) -> tuple[dict, int]:
     """Segmentation scores of the extracted symmetry that best realises ``truth``.
 
-    Every extracted symmetry is extended to the input vertices
-    (:func:`intrinsym.extract.vertex_map`) and scored with
+    Every extracted symmetry is extended to the input vertices as ``symmetry_map.npy``
+    is (:func:`intrinsym.extract.fitted_vertex_map`) and scored with
     :func:`intrinsym.evaluate.segmentation_scores`; the one with the best mean score is
     the pipeline's version of the principal map.
 
@@ -171,9 +171,9 @@ def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: 
         Its index in ``result.extraction.symmetries`` (-1 for none).
     """
     best, best_index = {}, -1
-    n_s = len(result.marginals)
     for i, sym in enumerate(result.extraction.symmetries):
-        vmap = extract.vertex_map(sym, result.support.vertex_source, result.target_vertex, n_s)
+        vmap = extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
+                                         result.target_points, result.target_vertex, result.params.extraction())
         scores = evaluate.segmentation_scores(vmap, truth, labels)
         if not best or np.mean(list(scores.values())) > np.mean(list(best.values())):
             best, best_index = scores, i

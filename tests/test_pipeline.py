@@ -94,6 +94,7 @@ def test_paper_preset():
     assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
     assert not p.unary_seeds and not p.extraction().unary_seeds
     assert pipeline.make_params().extraction().unary_seeds
+    assert p.extraction().vertex_fit == 0 < pipeline.make_params().extraction().vertex_fit
     with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
         pipeline.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):
