@@ -50,7 +50,8 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert np.array_equal(again.marginals, r.marginals)
     assert again.params == r.params
     with np.load(out / "result.npz") as z:
-        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS)
+        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS
+                                         + pipeline.extract.Support.OPTIONAL_KEYS)
 
 
 def test_deterministic_for_a_seed(spot, spot_result):
