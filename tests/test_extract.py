@@ -197,6 +197,9 @@ def test_vertex_map_and_nearest_targets():
     assert nearest_targets(pts[IDENTITY] * 1.001, pts).tolist() == IDENTITY.tolist()
 
 
+FIT = ExtractParams(vertex_fit=0.5)
+
+
 def plane_mirror(image_of=None):
     """A 9 x 9 vertex grid on the unit square (z = 0), samples at every other vertex (a
     5 x 5 grid, edges of length 0.25), mirrored by x -> 1 - x. Returns the symmetry
@@ -228,14 +231,14 @@ def test_fitted_vertex_map_resolves_the_cells():
     the local linear fits to its own mirror image."""
     sym, support, edges, points, truth, sample_vertex = plane_mirror()
     cells = vertex_map(sym, support.vertex_source, sample_vertex, len(points))
-    fitted = fitted_vertex_map(sym, support, edges, points, points, sample_vertex)
+    fitted = fitted_vertex_map(sym, support, edges, points, points, sample_vertex, FIT)
     assert np.mean(cells == truth) < 0.5
     assert fitted.tolist() == truth.tolist()
     # vertex_fit 0, or a support without vertex positions, gives the cell map
     assert fitted_vertex_map(sym, support, edges, points, points, sample_vertex,
                              ExtractParams(vertex_fit=0.0)).tolist() == cells.tolist()
     bare = Support(support.edge_length, support.targets, support.vertex_source, support.vertex_target, True)
-    assert fitted_vertex_map(sym, bare, edges, points, points, sample_vertex).tolist() == cells.tolist()
+    assert fitted_vertex_map(sym, bare, edges, points, points, sample_vertex, FIT).tolist() == cells.tolist()
 
 
 def test_fitted_vertex_map_keeps_the_cells_where_the_fit_fails():
@@ -244,7 +247,7 @@ def test_fitted_vertex_map_keeps_the_cells_where_the_fit_fails():
     away are still fitted exactly."""
     sym, support, edges, points, truth, sample_vertex = plane_mirror(image_of={12: 0})
     cells = vertex_map(sym, support.vertex_source, sample_vertex, len(points))
-    fitted = fitted_vertex_map(sym, support, edges, points, points, sample_vertex)
+    fitted = fitted_vertex_map(sym, support, edges, points, points, sample_vertex, FIT)
     near_centre = np.isin(support.vertex_source, [7, 11, 12, 13, 17])
     assert fitted[near_centre].tolist() == cells[near_centre].tolist()
     far = np.isin(support.vertex_source, [0, 4, 20, 24])

@@ -95,7 +95,7 @@ def test_paper_preset():
     assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
     assert not p.unary_seeds and not p.extraction().unary_seeds
     assert pipeline.make_params().extraction().unary_seeds
-    assert p.extraction().vertex_fit == 0 < pipeline.make_params().extraction().vertex_fit
+    assert p.extraction().vertex_fit == 0 and pipeline.make_params(vertex_fit=0.5).extraction().vertex_fit == 0.5
     with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
         pipeline.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):

@@ -67,7 +67,9 @@ class ExtractParams:
         :func:`fitted_vertex_map` maps the input vertices of a sample's Voronoi cell
         through the linear map fitted to the sample's mapped neighbours when every
         neighbour's relative residual is at most this (beyond the paper; 0: each vertex
-        takes its sample's image, :func:`vertex_map`).
+        takes its sample's image, :func:`vertex_map`). Off by default: 0.5 lifts the
+        generated figure's segmentation to 0.91-1.00 per part and lowers the TOSCA
+        global maps' mean error, but costs 1-3 points within 0.10 on cat1 and michael1.
     """
 
     threshold: float = 0.5
@@ -80,7 +82,7 @@ class ExtractParams:
     max_count: int = 32
     keep_identity: bool = False
     unary_seeds: bool = True
-    vertex_fit: float = 0.5
+    vertex_fit: float = 0.0
 
     def __post_init__(self) -> None:
         checks = [
