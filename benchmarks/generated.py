@@ -18,7 +18,11 @@ extracted symmetries, judged on the mirror-symmetric reference pose.
 
 Prints one table and exits 1 when a criterion fails::
 
-    python benchmarks/generated.py [--quick]
+    python benchmarks/generated.py [--quick] [--cache DIR]
+
+With ``--cache DIR`` each pipeline result is saved under ``DIR/<case>`` and, on later
+runs, loaded from there and only re-extracted (to measure changes of the extraction
+without rerunning BP).
 
 Lengths are in units of sqrt(surface area), as everywhere in intrinsym.
 """
@@ -84,6 +88,23 @@ class Report:
         return any(r.ok is False for r in self.rows)
 
 
+def cached(cache: Path | None, name: str, run) -> tuple[intrinsym.Result, float]:
+    """``run()``'s result and its seconds; with ``cache``, saved to or loaded from
+    ``cache/name`` and then re-extracted with the current code (seconds: extraction)."""
+    folder = None if cache is None else cache / name
+    start = time.perf_counter()
+    if folder is not None and (folder / "result.npz").exists():
+        result = intrinsym.Result.load(folder)
+        result.extraction = extract.from_result(result.marginals, result.edges, result.support,
+                                                result.source_points, result.target_points,
+                                                result.params.extraction(), unary=result.unary)
+    else:
+        result = run()
+        if folder is not None:
+            result.save(folder)
+    return result, time.perf_counter() - start
+
+
 def geodesic_graph(vertices: np.ndarray, faces: np.ndarray):
     """Geodesic graph of a mesh scaled to unit surface area (the pipeline's units)."""
     area = mesh.surface_area(mesh.from_arrays(vertices, faces))
@@ -137,8 +158,8 @@ def arm_matrix(result: intrinsym.Result, source_labels: np.ndarray, target_label
 def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: np.ndarray) -> tuple[dict, int]:
     """Segmentation scores of the extracted symmetry that best realises ``truth``.
 
-    Every extracted symmetry is extended to the input vertices
-    (:func:`intrinsym.extract.vertex_map`) and scored with
+    Every extracted symmetry is extended to the input vertices as ``symmetry_map.npy``
+    is (:func:`intrinsym.extract.fitted_vertex_map`) and scored with
     :func:`intrinsym.evaluate.segmentation_scores`; the one with the best mean score is
     the pipeline's version of the principal map.
 
@@ -150,9 +171,9 @@ def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: 
         Its index in ``result.extraction.symmetries`` (-1 for none).
     """
     best, best_index = {}, -1
-    n_s = len(result.marginals)
     for i, sym in enumerate(result.extraction.symmetries):
-        vmap = extract.vertex_map(sym, result.support.vertex_source, result.target_vertex, n_s)
+        vmap = extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
+                                         result.target_points, result.target_vertex, result.params.extraction())
         scores = evaluate.segmentation_scores(vmap, truth, labels)
         if not best or np.mean(list(scores.values())) > np.mean(list(best.values())):
             best, best_index = scores, i
@@ -186,11 +207,10 @@ def summary(report: Report, name: str, result: intrinsym.Result, seconds: float)
                f"{'' if bp['converged'] else ' (not converged)'}", kinds, None, seconds)
 
 
-def run_cuboctahedron(report: Report, sizes: tuple[int, int]) -> None:
+def run_cuboctahedron(report: Report, sizes: tuple[int, int], cache: Path | None) -> None:
     shape = shapes.cuboctahedron()
-    start = time.perf_counter()
-    result = intrinsym.detect((shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1])
-    seconds = time.perf_counter() - start
+    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect(
+        (shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1]))
     summary(report, shape.name, result, seconds)
     peaks, parts = corner_recovery(result, shape)
     for what, found in (("marginal peaks", peaks), ("query parts", parts)):
@@ -201,29 +221,29 @@ def run_cuboctahedron(report: Report, sizes: tuple[int, int]) -> None:
     check_segmentation(report, shape.name, result, shape.symmetries[0], shape.labels)
 
 
-def run_star(report: Report, sizes: tuple[int, int]) -> None:
+def run_star(report: Report, sizes: tuple[int, int], cache: Path | None) -> None:
     shape = shapes.star(5)
-    start = time.perf_counter()
-    result = intrinsym.detect((shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1])
-    summary(report, shape.name, result, time.perf_counter() - start)
+    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect(
+        (shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1]))
+    summary(report, shape.name, result, seconds)
     check_arms(report, shape.name, result, shape.labels, shape.labels, include_self=False)
     check_segmentation(report, shape.name, result, shape.symmetries[0], shape.labels)
 
 
-def run_lantern(report: Report, sizes: tuple[int, int]) -> None:
+def run_lantern(report: Report, sizes: tuple[int, int], cache: Path | None) -> None:
     a, b = shapes.lantern()
-    start = time.perf_counter()
-    result = intrinsym.match((a.vertices, a.faces), (b.vertices, b.faces), n_source=sizes[0], n_target=sizes[1])
-    summary(report, "lantern", result, time.perf_counter() - start)
+    result, seconds = cached(cache, "lantern", lambda: intrinsym.match(
+        (a.vertices, a.faces), (b.vertices, b.faces), n_source=sizes[0], n_target=sizes[1]))
+    summary(report, "lantern", result, seconds)
     check_arms(report, "lantern", result, a.labels, b.labels, include_self=True)
     check_segmentation(report, "lantern", result, a.symmetries[0], a.labels)
 
 
-def run_figure(report: Report, sizes: tuple[int, int]) -> None:
+def run_figure(report: Report, sizes: tuple[int, int], cache: Path | None) -> None:
     shape = shapes.figure()
-    start = time.perf_counter()
-    result = intrinsym.detect((shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1])
-    summary(report, shape.name, result, time.perf_counter() - start)
+    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect(
+        (shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1]))
+    summary(report, shape.name, result, seconds)
     check_segmentation(report, shape.name, result, shape.symmetries[0], shape.labels)
 
 
@@ -250,13 +270,13 @@ def horse_sides(result: intrinsym.Result, reference: np.ndarray, scale: float) -
     return out
 
 
-def run_horse(report: Report, sizes: tuple[int, int]) -> None:
+def run_horse(report: Report, sizes: tuple[int, int], cache: Path | None) -> None:
     if not HORSE.exists():
         report.add("horse", f"skipped: {HORSE} absent", "", None)
         return
-    start = time.perf_counter()
-    result = intrinsym.match(HORSE / "horse-01.obj", HORSE / "horse-03.obj", n_source=sizes[0], n_target=sizes[1])
-    summary(report, "horse 01->03", result, time.perf_counter() - start)
+    result, seconds = cached(cache, "horse", lambda: intrinsym.match(
+        HORSE / "horse-01.obj", HORSE / "horse-03.obj", n_source=sizes[0], n_target=sizes[1]))
+    summary(report, "horse 01->03", result, seconds)
     ref = intrinsym.load(HORSE / "horse_ref.obj")
     scale = float(np.sqrt(mesh.surface_area(ref)))
     sides = horse_sides(result, np.asarray(ref.vertices), scale)
@@ -268,14 +288,21 @@ def run_horse(report: Report, sizes: tuple[int, int]) -> None:
     report.add("horse 01->03", "left/right swap found (>= 0.8 swapped)", str(swap), swap)
 
 
+CASES = {"cuboctahedron": run_cuboctahedron, "star": run_star, "lantern": run_lantern, "figure": run_figure,
+         "horse": run_horse}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help=f"smaller samples {SIZES['quick']} instead of {SIZES['full']}")
+    parser.add_argument("--cache", type=Path, help="save results here; later runs load and re-extract them")
+    parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="cases to run")
     args = parser.parse_args(argv)
     sizes = SIZES["quick" if args.quick else "full"]
+    cache = None if args.cache is None else args.cache / ("quick" if args.quick else "full")
     report = Report()
-    for run in (run_cuboctahedron, run_star, run_lantern, run_figure, run_horse):
-        run(report, sizes)
+    for name in args.cases:
+        CASES[name](report, sizes, cache)
     report.print()
     return 1 if report.failed else 0
 

@@ -13,9 +13,12 @@ import pytest
 from intrinsym.extract import (
     ExtractParams,
     SourceGraph,
+    Support,
+    Symmetry,
     _merge,
     complete,
     extract,
+    fitted_vertex_map,
     grow,
     nearest_targets,
     normalise_rows,
@@ -195,7 +198,74 @@ def test_vertex_map_and_nearest_targets():
     assert nearest_targets(pts[IDENTITY] * 1.001, pts).tolist() == IDENTITY.tolist()
 
 
-@pytest.mark.parametrize("bad", [dict(threshold=0.0), dict(d_error=0.0), dict(global_fraction=2.0), dict(min_fraction=1.5), dict(max_count=0)])
+FIT = ExtractParams(vertex_fit=0.5)
+
+
+def plane_mirror(image_of=None):
+    """A 9 x 9 vertex grid on the unit square (z = 0), samples at every other vertex (a
+    5 x 5 grid, edges of length 0.25), mirrored by x -> 1 - x. Returns the symmetry
+    (``image_of`` overrides sample images), the support, the sample edges, the sample
+    positions, the true vertex map and the vertex of every sample."""
+    from scipy.spatial import cKDTree
+
+    ij = np.array([(i, j) for i in range(9) for j in range(9)])
+    vertices = np.column_stack([ij / 8.0, np.zeros(len(ij))])
+    truth = (8 - ij[:, 0]) * 9 + ij[:, 1]
+    sample_vertex = np.flatnonzero((ij % 2 == 0).all(axis=1))
+    points = vertices[sample_vertex]
+    n = len(points)
+    image = np.array([np.flatnonzero(sample_vertex == truth[v])[0] for v in sample_vertex])
+    if image_of is not None:
+        image[list(image_of)] = list(image_of.values())
+    d = np.linalg.norm(points[:, None] - points[None], axis=2)
+    edges = np.array([(a, b) for a in range(n) for b in range(a + 1, n) if abs(d[a, b] - 0.25) < 1e-9])
+    rows = [np.argsort(d[i], kind="stable") for i in range(n)]
+    targets = SparseDistances(np.arange(n + 1) * n, np.concatenate(rows), np.concatenate([d[i, r] for i, r in enumerate(rows)]),
+                              float(d.max()))
+    cells = cKDTree(points).query(vertices + 1e-6)[1]  # ties broken towards the lower-left sample
+    support = Support(np.full(len(edges), 0.25), targets, cells, cells, True, vertices, vertices)
+    return Symmetry(np.arange(n), image, 1.0, 1.0, "global"), support, edges, points, truth, sample_vertex
+
+
+def test_fitted_vertex_map_resolves_the_cells():
+    """The exact mirror of the samples: cells send every vertex to its sample's image,
+    the local linear fits to its own mirror image."""
+    sym, support, edges, points, truth, sample_vertex = plane_mirror()
+    cells = vertex_map(sym, support.vertex_source, sample_vertex, len(points))
+    fitted = fitted_vertex_map(sym, support, edges, points, points, sample_vertex, FIT)
+    assert np.mean(cells == truth) < 0.5
+    assert fitted.tolist() == truth.tolist()
+    # vertex_fit 0, or a support without vertex positions, gives the cell map
+    assert fitted_vertex_map(sym, support, edges, points, points, sample_vertex,
+                             ExtractParams(vertex_fit=0.0)).tolist() == cells.tolist()
+    bare = Support(support.edge_length, support.targets, support.vertex_source, support.vertex_target, True)
+    assert fitted_vertex_map(sym, bare, edges, points, points, sample_vertex, FIT).tolist() == cells.tolist()
+
+
+def test_fitted_vertex_map_keeps_the_cells_where_the_fit_fails():
+    """The centre sample (12) mapped to a corner: its neighbours' fits leave residuals
+    far above vertex_fit, so their cells keep their samples' images; cells two steps
+    away are still fitted exactly."""
+    sym, support, edges, points, truth, sample_vertex = plane_mirror(image_of={12: 0})
+    cells = vertex_map(sym, support.vertex_source, sample_vertex, len(points))
+    fitted = fitted_vertex_map(sym, support, edges, points, points, sample_vertex, FIT)
+    near_centre = np.isin(support.vertex_source, [7, 11, 12, 13, 17])
+    assert fitted[near_centre].tolist() == cells[near_centre].tolist()
+    far = np.isin(support.vertex_source, [0, 4, 20, 24])
+    assert fitted[far].tolist() == truth[far].tolist()
+
+
+def test_support_arrays_round_trip_with_and_without_vertices():
+    _, support, *_ = plane_mirror()
+    back = Support.from_arrays(support.to_arrays())
+    assert np.array_equal(back.source_vertices, support.source_vertices)
+    assert np.array_equal(back.target_vertices, support.target_vertices)
+    old = {k: v for k, v in support.to_arrays().items() if k in Support.KEYS}
+    assert Support.from_arrays(old).source_vertices is None
+
+
+@pytest.mark.parametrize("bad", [dict(threshold=0.0), dict(d_error=0.0), dict(global_fraction=2.0), dict(min_fraction=1.5),
+                                 dict(max_count=0), dict(vertex_fit=-1.0)])
 def test_params_validated(bad):
     with pytest.raises(ValueError):
         ExtractParams(**bad)

@@ -50,7 +50,8 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert np.array_equal(again.marginals, r.marginals)
     assert again.params == r.params
     with np.load(out / "result.npz") as z:
-        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS)
+        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS
+                                         + pipeline.extract.Support.OPTIONAL_KEYS)
 
 
 def test_deterministic_for_a_seed(spot, spot_result):
@@ -102,6 +103,7 @@ def test_paper_preset():
     assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
     assert not p.unary_seeds and not p.extraction().unary_seeds
     assert pipeline.make_params().extraction().unary_seeds
+    assert p.extraction().vertex_fit == 0 and pipeline.make_params(vertex_fit=0.5).extraction().vertex_fit == 0.5
     with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
         pipeline.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):

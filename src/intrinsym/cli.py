@@ -55,6 +55,9 @@ MODEL_OPTIONS = [
     ("--d-error", "d_error", float,
      f"extraction: geodesic error bound of the region growing, units of sqrt(area) (default {D.d_error}; "
      "paper 0.001-0.15)"),
+    ("--vertex-fit", "vertex_fit", float,
+     f"extraction: largest relative residual of the local linear fits that extend the global map to every "
+     f"input vertex; 0 gives each vertex its sample's image (default {D.vertex_fit}, off; 0.5 measured on the generated figure)"),
 ]
 
 

@@ -63,6 +63,13 @@ class ExtractParams:
     unary_seeds : bool
         When :func:`extract` or :func:`query` is given the unary, also seed parts from
         its peaks (beyond the paper; see :func:`extract`).
+    vertex_fit : float
+        :func:`fitted_vertex_map` maps the input vertices of a sample's Voronoi cell
+        through the linear map fitted to the sample's mapped neighbours when every
+        neighbour's relative residual is at most this (beyond the paper; 0: each vertex
+        takes its sample's image, :func:`vertex_map`). Off by default: 0.5 lifts the
+        generated figure's segmentation to 0.91-1.00 per part and lowers the TOSCA
+        global maps' mean error, but costs 1-3 points within 0.10 on cat1 and michael1.
     """
 
     threshold: float = 0.5
@@ -75,6 +82,7 @@ class ExtractParams:
     max_count: int = 32
     keep_identity: bool = False
     unary_seeds: bool = True
+    vertex_fit: float = 0.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -86,6 +94,7 @@ class ExtractParams:
             (not 0 <= self.min_fraction <= 1, "min_fraction must lie in [0, 1]"),
             (self.max_count < 1, "max_count must be at least 1"),
             (self.seeds_per_sample < 1, "seeds_per_sample must be at least 1"),
+            (self.vertex_fit < 0, "vertex_fit must be non-negative"),
         ]
         for bad, message in checks:
             if bad:
@@ -188,6 +197,9 @@ class Support:
         The same for the target samples on the target shape.
     self_match : bool
         Source and target are one shape (enables the identity kind).
+    source_vertices, target_vertices : (N_a, 3), (N_b, 3) float64, optional
+        The input vertices of both shapes, in the frame of the sample positions (for
+        :func:`fitted_vertex_map`).
     """
 
     edge_length: np.ndarray
@@ -195,14 +207,21 @@ class Support:
     vertex_source: np.ndarray
     vertex_target: np.ndarray
     self_match: bool
+    source_vertices: np.ndarray | None = None
+    target_vertices: np.ndarray | None = None
 
     KEYS = ("edge_length", "vertex_source", "vertex_target", "target_distance_indptr",
             "target_distance_index", "target_distance", "target_distance_radius", "self_match")
+    #: Keys stored when present (results written before they existed lack them).
+    OPTIONAL_KEYS = ("source_vertices", "target_vertices")
 
     def to_arrays(self) -> dict[str, np.ndarray]:
-        """Arrays to store (under :attr:`KEYS`) beside a result's own arrays."""
+        """Arrays to store (under :attr:`KEYS` and :attr:`OPTIONAL_KEYS`) beside a
+        result's own arrays."""
         t = self.targets
-        return {
+        optional = {k: np.asarray(getattr(self, k), dtype=np.float64) for k in self.OPTIONAL_KEYS
+                    if getattr(self, k) is not None}
+        return optional | {
             "edge_length": np.asarray(self.edge_length, dtype=np.float64),
             "vertex_source": np.asarray(self.vertex_source, dtype=np.int64),
             "vertex_target": np.asarray(self.vertex_target, dtype=np.int64),
@@ -215,11 +234,12 @@ class Support:
 
     @classmethod
     def from_arrays(cls, z: dict) -> Support:
-        """Inverse of :meth:`to_arrays`."""
+        """Inverse of :meth:`to_arrays` (optional keys may be missing)."""
         targets = SparseDistances(z["target_distance_indptr"].astype(np.int64),
                                   z["target_distance_index"].astype(np.int64),
                                   z["target_distance"].astype(np.float64), float(z["target_distance_radius"]))
-        return cls(z["edge_length"], targets, z["vertex_source"], z["vertex_target"], bool(z["self_match"]))
+        return cls(z["edge_length"], targets, z["vertex_source"], z["vertex_target"], bool(z["self_match"]),
+                   *(z.get(k) for k in cls.OPTIONAL_KEYS))
 
 
 # --------------------------------------------------------------------------- kernels
@@ -760,6 +780,79 @@ def vertex_map(symmetry: Symmetry, vertex_source: np.ndarray, target_vertex: np.
     image = np.append(symmetry.image(n_source), -1)
     sample = image[np.where(vertex_source >= 0, vertex_source, n_source)]
     return np.where(sample >= 0, np.asarray(target_vertex)[np.maximum(sample, 0)], -1).astype(np.int64)
+
+
+def _members(owner: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices grouped by owner: ``order[bounds[i]:bounds[i + 1]]`` are those with
+    ``owner == i`` (entries -1 belong to none)."""
+    order = np.argsort(owner, kind="stable")
+    return order, np.searchsorted(owner[order], np.arange(n + 1))
+
+
+def fitted_vertex_map(
+    symmetry: Symmetry,
+    support: Support,
+    edges: np.ndarray,
+    source_points: np.ndarray,
+    target_points: np.ndarray,
+    target_vertex: np.ndarray,
+    params: ExtractParams = ExtractParams(),
+) -> np.ndarray:
+    """Extend a symmetry to every input vertex through local linear fits (beyond the paper).
+
+    :func:`vertex_map` gives every vertex of a sample's Voronoi cell the sample's image,
+    so parts are resolved only to the sample spacing (on the generated figure the exact
+    map at the samples scores 0.78-0.90 per part that way). Here a mapped sample s with
+    at least two mapped neighbours n fits the linear map L (least squares, minimum norm)
+    with L (p_n - p_s) = q_f(n) - q_f(s); when every neighbour's residual is at most
+    ``params.vertex_fit`` times its edge, each vertex x of the cell goes to the target
+    vertex nearest q_f(s) + L (x - p_s) among those in the cells of the targets within
+    ``support.targets.radius`` of f(s). The other vertices keep :func:`vertex_map`.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    support : Support
+        Needs ``source_vertices`` and ``target_vertices``; without them (or with
+        ``params.vertex_fit`` 0) this is :func:`vertex_map`.
+    edges : (E, 2) int64
+    source_points, target_points : (S, 3), (T, 3) float64
+        Sample positions in the frame of the support's vertices.
+    target_vertex : (T,) int64
+    params : ExtractParams
+
+    Returns
+    -------
+    (N_a,) int64
+        Target input vertex of every source input vertex, -1 where the symmetry says
+        nothing.
+    """
+    n_s = len(source_points)
+    out = vertex_map(symmetry, support.vertex_source, target_vertex, n_s)
+    if params.vertex_fit <= 0 or support.source_vertices is None or support.target_vertices is None:
+        return out
+    graph = SourceGraph.from_edges(edges, support.edge_length, n_s)
+    image = symmetry.image(n_s)
+    cell_order, cell_bounds = _members(np.asarray(support.vertex_source), n_s)
+    owner = np.asarray(support.vertex_target)
+    t = support.targets
+    for s in np.flatnonzero(image >= 0):
+        cell = cell_order[cell_bounds[s] : cell_bounds[s + 1]]
+        nbr = graph.neighbour[graph.ptr[s] : graph.ptr[s + 1]]
+        nbr = nbr[image[nbr] >= 0]
+        if len(nbr) < 2 or not len(cell):
+            continue
+        d = source_points[nbr] - source_points[s]
+        e = target_points[image[nbr]] - target_points[image[s]]
+        lin = np.linalg.lstsq(d, e, rcond=None)[0]
+        if np.max(np.linalg.norm(d @ lin - e, axis=1) / np.linalg.norm(d, axis=1)) > params.vertex_fit:
+            continue
+        near = np.zeros(len(target_points) + 1, dtype=bool)
+        near[t.indices[t.indptr[image[s]] : t.indptr[image[s] + 1]]] = True
+        candidates = np.flatnonzero(near[owner])
+        y = target_points[image[s]] + (support.source_vertices[cell] - source_points[s]) @ lin
+        out[cell] = candidates[cKDTree(support.target_vertices[candidates]).query(y)[1]]
+    return out
 
 
 def from_result(

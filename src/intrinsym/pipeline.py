@@ -36,7 +36,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # paper's behaviour (BP converging in a handful of iterations, sharpening the unary
     # rather than smearing it); 1.5 spacings measured a far weaker model on TOSCA cat0.
     "paper": dict(rho=0.4, gamma=0.01, schedule="serial", iterations=100, remove_trivial=False, tolerance=0.5,
-                  unary="spin", potential="paper", unary_seeds=False),
+                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0),
 }
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
@@ -122,6 +122,10 @@ class Params:
     unary_seeds : bool
         Also grow symmetries from the peaks of the unary, not only of the marginals
         (beyond the paper; :func:`intrinsym.extract.extract`).
+    vertex_fit : float
+        Largest relative residual of the local linear fits that extend the global map
+        to the input vertices (``symmetry_map.npy``); 0 gives each vertex its sample's
+        image (beyond the paper; :func:`intrinsym.extract.fitted_vertex_map`).
     """
 
     n_source: int | None = 250
@@ -154,6 +158,7 @@ class Params:
     peak_threshold: float = extract.ExtractParams.threshold
     d_error: float = extract.ExtractParams.d_error
     unary_seeds: bool = True
+    vertex_fit: float = extract.ExtractParams.vertex_fit
 
     def __post_init__(self) -> None:
         checks = [
@@ -204,7 +209,8 @@ class Params:
 
     def extraction(self) -> extract.ExtractParams:
         """The symmetry-extraction parameters."""
-        return extract.ExtractParams(threshold=self.peak_threshold, d_error=self.d_error, unary_seeds=self.unary_seeds)
+        return extract.ExtractParams(threshold=self.peak_threshold, d_error=self.d_error, unary_seeds=self.unary_seeds,
+                                     vertex_fit=self.vertex_fit)
 
 
 def make_params(preset: str = "default", **overrides: Any) -> Params:
@@ -440,7 +446,8 @@ class Result:
             n_in = len(self.support.vertex_source)
             g = self.extraction.global_index
             vmap = (np.full(n_in, -1, dtype=np.int64) if g < 0 else
-                    extract.vertex_map(found[g], self.support.vertex_source, self.target_vertex, len(self.marginals)))
+                    extract.fitted_vertex_map(found[g], self.support, self.edges, self.source_points,
+                                              self.target_points, self.target_vertex, self.extraction.params))
             atomic_write(out / "symmetry_map.npy", lambda f: np.save(f, vmap), binary=True)
         return out
 
@@ -451,7 +458,8 @@ class Result:
         with np.load(out / "result.npz") as z:
             arrays = {name: z[name] for name in cls.ARRAYS}
             has_support = all(key in z.files for key in extract.Support.KEYS)
-            support = extract.Support.from_arrays({k: z[k] for k in extract.Support.KEYS}) if has_support else None
+            keys = extract.Support.KEYS + tuple(k for k in extract.Support.OPTIONAL_KEYS if k in z.files)
+            support = extract.Support.from_arrays({k: z[k] for k in keys}) if has_support else None
         run = json.loads((out / "run.json").read_text())
         params = Params(**run.pop("params"))
         return cls(**arrays, params=params, info=run, support=support)
@@ -546,6 +554,8 @@ def _solve(
         vertex_source=geodesics.voronoi_cells(src.graph, ps)[src.vertex_map],
         vertex_target=geodesics.voronoi_cells(tgt.graph, pt)[tgt.vertex_map],
         self_match=self_match,
+        source_vertices=src.input_vertices,
+        target_vertices=tgt.input_vertices,
     )
     extraction = extract.from_result(
         res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary
