@@ -7,6 +7,8 @@ the identity sends sample i to target 4i, the mirror about the axis through targ
 and 22 sends it to (4 - 4i) mod 40 (no sample is a fixed point).
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -260,6 +262,14 @@ def test_support_arrays_round_trip_with_and_without_vertices():
     back = Support.from_arrays(support.to_arrays())
     assert np.array_equal(back.source_vertices, support.source_vertices)
     assert np.array_equal(back.target_vertices, support.target_vertices)
+    # self-matching: one shape, its vertices stored once
+    assert "target_vertices" not in support.to_arrays()
+    # two shapes: both stored and read back apart
+    other = dataclasses.replace(support, self_match=False, target_vertices=2.0 * support.target_vertices)
+    assert "target_vertices" in other.to_arrays()
+    back = Support.from_arrays(other.to_arrays())
+    assert np.array_equal(back.source_vertices, support.source_vertices)
+    assert np.array_equal(back.target_vertices, 2.0 * support.target_vertices)
     old = {k: v for k, v in support.to_arrays().items() if k in Support.KEYS}
     assert Support.from_arrays(old).source_vertices is None
 

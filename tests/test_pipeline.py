@@ -50,8 +50,10 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert np.array_equal(again.marginals, r.marginals)
     assert again.params == r.params
     with np.load(out / "result.npz") as z:
+        # one shape: its input vertices are stored once, as source_vertices
         assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS
-                                         + pipeline.extract.Support.OPTIONAL_KEYS)
+                                         + ("source_vertices",))
+    assert np.array_equal(again.support.target_vertices, r.support.target_vertices)
 
 
 def test_deterministic_for_a_seed(spot, spot_result):

@@ -217,9 +217,10 @@ class Support:
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Arrays to store (under :attr:`KEYS` and :attr:`OPTIONAL_KEYS`) beside a
-        result's own arrays."""
+        result's own arrays; when self-matching, the one shape's vertices are stored once."""
         t = self.targets
-        optional = {k: np.asarray(getattr(self, k), dtype=np.float64) for k in self.OPTIONAL_KEYS
+        stored = self.OPTIONAL_KEYS[:1] if self.self_match else self.OPTIONAL_KEYS
+        optional = {k: np.asarray(getattr(self, k), dtype=np.float64) for k in stored
                     if getattr(self, k) is not None}
         return optional | {
             "edge_length": np.asarray(self.edge_length, dtype=np.float64),
@@ -238,8 +239,11 @@ class Support:
         targets = SparseDistances(z["target_distance_indptr"].astype(np.int64),
                                   z["target_distance_index"].astype(np.int64),
                                   z["target_distance"].astype(np.float64), float(z["target_distance_radius"]))
-        return cls(z["edge_length"], targets, z["vertex_source"], z["vertex_target"], bool(z["self_match"]),
-                   *(z.get(k) for k in cls.OPTIONAL_KEYS))
+        self_match = bool(z["self_match"])
+        source_vertices = z.get("source_vertices")
+        target_vertices = source_vertices if self_match else z.get("target_vertices")
+        return cls(z["edge_length"], targets, z["vertex_source"], z["vertex_target"], self_match,
+                   source_vertices, target_vertices)
 
 
 # --------------------------------------------------------------------------- kernels
