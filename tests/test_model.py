@@ -55,21 +55,33 @@ def test_descriptor_scale_is_median_of_k_nearest():
         descriptor_scale(d, 5)
 
 
+def test_descriptor_scale_from_nearest_targets_on_the_surface():
+    d = np.array([[5.0, 1.0, 2.0, 9.0], [0.5, 7.0, 3.0, 4.0]])
+    # row 0 pairs with targets 0 and 3, row 1 with target 2 only: median of 5, 9, 3 = 5
+    assert descriptor_scale(d, near=np.array([[0, 3], [2, -1]])) == pytest.approx(5.0)
+    # the k nearest in descriptor space would say 1.5: many exact images at distance ~0
+    # shrink that proxy, the surface neighbours do not depend on them
+    with pytest.raises(ValueError):
+        descriptor_scale(d, near=np.full((2, 1), -1))
+
+
 def test_calibrated_potential_values_products_and_floor():
     d = np.array([[0.0, 1.0, 2.0, 10.0]])
-    sigma = descriptor_scale(d, 3)  # median of 0, 1, 2 = 1
-    phi = calibrated_potential([d], k=3, floor=1e-3)
-    np.testing.assert_allclose(phi[0, :3], np.exp(-np.array([0.0, 0.5, 2.0]) / sigma**2))
+    phi = calibrated_potential([d], [1.0], floor=1e-3)
+    np.testing.assert_allclose(phi[0, :3], np.exp(-np.array([0.0, 0.5, 2.0])))
     assert phi[0, 3] == 1e-3  # exp(-50) floored
-    # Units do not matter: the width follows the descriptor's own spread.
-    np.testing.assert_allclose(calibrated_potential([d * 1e4], k=3), phi)
+    # Units do not matter when the scale is measured in them.
+    np.testing.assert_allclose(calibrated_potential([d * 1e4], [descriptor_scale(d * 1e4, 3)]),
+                               calibrated_potential([d], [descriptor_scale(d, 3)]))
     # A product of two terms is the product of their potentials (above the floor).
-    both = calibrated_potential([d, 2 * d], k=3, floor=1e-9)
-    np.testing.assert_allclose(both[0, :3], calibrated_potential([d], 3, 1e-9)[0, :3] ** 2)
+    both = calibrated_potential([d, 2 * d], [1.0, 2.0], floor=1e-9)
+    np.testing.assert_allclose(both[0, :3], calibrated_potential([d], [1.0], 1e-9)[0, :3] ** 2)
     with pytest.raises(ValueError):
-        calibrated_potential([], k=1)
+        calibrated_potential([], [])
     with pytest.raises(ValueError):
-        calibrated_potential([d], k=3, floor=0.0)
+        calibrated_potential([d], [1.0, 2.0])
+    with pytest.raises(ValueError):
+        calibrated_potential([d], [1.0], floor=0.0)
 
 
 def test_calibrated_wks_unary_peaks_at_the_mirror_of_a_generated_shape(mirror):
@@ -84,7 +96,7 @@ def test_calibrated_wks_unary_peaks_at_the_mirror_of_a_generated_shape(mirror):
     a = wave_kernel_signature(evals, evecs[ps], energies, sigma)
     b = wave_kernel_signature(evals, evecs[pt], energies, sigma)
     dist = np.linalg.norm(a[:, None] - b[None], axis=2)
-    unary = calibrated_potential([dist], k=7, floor=1e-3)
+    unary = calibrated_potential([dist], [descriptor_scale(dist, 7)], floor=1e-3)
     euclid = np.linalg.norm(v[ps][:, None] - v[pt][None], axis=2)
     unary = suppress_trivial(unary, euclid, 0.3, 1e-3)
     off_plane = np.abs(v[ps, 0]) > 0.3

@@ -47,8 +47,12 @@ MODEL_OPTIONS = [
                                       f"(default {D.potential})"),
     ("--eigenpairs", "eigenpairs", int, f"Laplace-Beltrami eigenpairs of wks/hks (default {D.eigenpairs})"),
     ("--energies", "energies", int, f"WKS energies / HKS times (default {D.energies})"),
-    ("--calibration-k", "calibration_k", int, f"nearest targets in descriptor space setting each calibrated "
-                                              f"width (default {D.calibration_k})"),
+    ("--calibration", "calibration", str, f"how each calibrated width is measured: offset (descriptor distance to "
+                                          f"the targets nearest a point on the surface), descriptor (to the "
+                                          f"--calibration-k nearest targets in descriptor space) or both (the larger) "
+                                          f"(default {D.calibration})"),
+    ("--calibration-k", "calibration_k", int, f"nearest targets in descriptor space of the descriptor rule "
+                                              f"(default {D.calibration_k})"),
     ("--unary-floor", "unary_floor", float, f"smallest calibrated unary potential (default {D.unary_floor})"),
     ("--peak-threshold", "peak_threshold", float,
      f"extraction: peak threshold t on the max-normalised marginal (default {D.peak_threshold}; paper 0.5-0.75)"),

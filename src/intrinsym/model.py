@@ -143,47 +143,58 @@ def suppress_trivial(
     return out
 
 
-def descriptor_scale(distance: np.ndarray, k: int = 7) -> float:
-    """Typical descriptor distance between a source sample and its nearest targets.
+def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None = None) -> float:
+    """Typical descriptor distance of a true match at the sampling offset.
 
-    The median, over all source samples, of the distances to their ``k`` nearest
-    targets in descriptor space. In self-matching these are mostly the targets around
-    the point itself, so the scale measures how much the descriptor changes over the
-    sampling offset: the spread a true match must be allowed.
+    With ``near``, the median of ``distance[s, near[s]]``: the distances from each
+    calibration point to the targets that lie nearest it on the surface, true matches
+    (the identity) displaced by the sampling offset. Without it, the median distance
+    from each source sample to its ``k`` nearest targets in descriptor space, a proxy
+    that shrinks on shapes with many exact symmetries (their images all lie at about
+    zero distance, so the spread of the offset is not measured).
 
     Parameters
     ----------
     distance : (S, T) array
         Descriptor distances, >= 0.
     k : int
-        Number of nearest targets per source sample, 1 <= k <= T.
+        Number of nearest targets per source sample, 1 <= k <= T (without ``near``).
+    near : (S, m) int array, optional
+        Targets nearest each row's point on the surface; -1 entries are ignored.
 
     Returns
     -------
     float, > 0 (a tiny positive number when the descriptor is constant).
     """
     d = np.asarray(distance, dtype=np.float64)
-    if not 1 <= k <= d.shape[1]:
-        raise ValueError(f"k must lie in [1, {d.shape[1]}], got {k}")
-    nearest = np.partition(d, k - 1, axis=1)[:, :k]
-    return max(float(np.median(nearest)), np.finfo(np.float64).tiny)
+    if near is not None:
+        near = np.asarray(near)
+        rows = np.broadcast_to(np.arange(d.shape[0])[:, None], near.shape)
+        values = d[rows[near >= 0], near[near >= 0]]
+        if values.size == 0:
+            raise ValueError("no calibration pair: every entry of near is -1")
+    else:
+        if not 1 <= k <= d.shape[1]:
+            raise ValueError(f"k must lie in [1, {d.shape[1]}], got {k}")
+        values = np.partition(d, k - 1, axis=1)[:, :k]
+    return max(float(np.median(values)), np.finfo(np.float64).tiny)
 
 
-def calibrated_potential(distances: list[np.ndarray], k: int = 7, floor: float = 1e-3) -> np.ndarray:
+def calibrated_potential(distances: list[np.ndarray], scales: list[float], floor: float = 1e-3) -> np.ndarray:
     """Unary from descriptor distances, calibrated per descriptor; products combine them.
 
     ``Phi = max(prod_i exp(-d_i^2 / (2 sigma_i^2)), floor)`` with ``sigma_i`` the
-    :func:`descriptor_scale` of the i-th distance matrix. Unlike Eq. 5 with a fixed
-    gamma, the width follows the measured spread of each descriptor, so a true match at
-    the sampling offset keeps a potential near 1 whatever the descriptor's units; the
-    floor keeps every message bounded below (DESIGN.md, "Division trick").
+    measured spread of the i-th descriptor on true matches (:func:`descriptor_scale`).
+    Unlike Eq. 5 with a fixed gamma, a true match at the sampling offset keeps a
+    potential near 1 whatever the descriptor's units; the floor keeps every message
+    bounded below (DESIGN.md, "Division trick").
 
     Parameters
     ----------
     distances : list of (S, T) arrays
         One descriptor-distance matrix per factor, >= 0.
-    k : int
-        Nearest targets per source sample that set each sigma.
+    scales : list of float
+        sigma_i of each factor, > 0, in the units of its distances.
     floor : float
         Smallest potential, in (0, 1).
 
@@ -191,11 +202,11 @@ def calibrated_potential(distances: list[np.ndarray], k: int = 7, floor: float =
     -------
     (S, T) float64 array, values in [floor, 1].
     """
-    if not distances:
-        raise ValueError("give at least one distance matrix")
+    if not distances or len(scales) != len(distances):
+        raise ValueError("give one scale per distance matrix, and at least one")
     if not 0 < floor < 1:
         raise ValueError(f"floor must lie in (0, 1), got {floor}")
     exponent = np.zeros(np.shape(distances[0]), dtype=np.float64)
-    for d in distances:
-        exponent += np.asarray(d, dtype=np.float64) ** 2 / (2.0 * descriptor_scale(d, k) ** 2)
+    for d, sigma in zip(distances, scales):
+        exponent += np.asarray(d, dtype=np.float64) ** 2 / (2.0 * sigma**2)
     return np.maximum(np.exp(-exponent), floor)

@@ -43,6 +43,10 @@ PRESETS: dict[str, dict[str, Any]] = {
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
 #: Similarity-to-potential maps: Eq. 5 with gamma, or calibrated Gaussians.
 POTENTIALS = ("paper", "calibrated")
+#: How the calibrated potential measures each descriptor's spread (:func:`_unary`).
+CALIBRATIONS = ("both", "offset", "descriptor")
+#: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
+OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
 SPIN_SCALES = (0.5, 1.0, 2.0)
 
@@ -106,12 +110,20 @@ class Params:
         wave- / heat-kernel signatures of Laplace-Beltrami eigenpairs).
     potential : {"calibrated", "paper"}
         "paper": Eq. 5 with ``gamma`` on NMI' (spin terms only). "calibrated":
-        exp(-d^2 / 2 sigma^2) per term, sigma the median descriptor distance to the
-        ``calibration_k`` nearest targets, the product floored at ``unary_floor``.
+        exp(-d^2 / 2 sigma^2) per term, sigma measured as ``calibration`` says, the
+        product floored at ``unary_floor``.
     eigenpairs : int
         Laplace-Beltrami eigenpairs of the WKS / HKS.
     energies : int
         Log-energies of the WKS, diffusion times of the HKS.
+    calibration : {"both", "offset", "descriptor"}
+        How sigma is measured. "offset": the median descriptor distance from points of
+        the target shape to the ``OFFSET_TARGETS`` targets nearest them on the surface,
+        i.e. of true matches at the sampling offset. "descriptor": the median distance
+        to the ``calibration_k`` nearest targets in descriptor space; on a shape with
+        many exact symmetries these all sit at about zero distance and sigma collapses.
+        "both": the larger of the two, which keeps the slack a descriptor needs where it
+        is not invariant under the symmetry sought (a global WKS on a partial symmetry).
     calibration_k : int
     unary_floor : float
         Smallest calibrated potential, in (0, 1).
@@ -153,6 +165,7 @@ class Params:
     potential: str = "calibrated"
     eigenpairs: int = 100
     energies: int = 100
+    calibration: str = "both"
     calibration_k: int = 7
     unary_floor: float = 1e-3
     peak_threshold: float = extract.ExtractParams.threshold
@@ -186,6 +199,7 @@ class Params:
              "potential 'paper' (Eq. 5) applies to a single spin-image term only"),
             (self.eigenpairs < 2, "eigenpairs must be at least 2"),
             (self.energies < 2, "energies must be at least 2"),
+            (self.calibration not in CALIBRATIONS, f"calibration must be one of {CALIBRATIONS}"),
             (self.calibration_k < 1, "calibration_k must be at least 1"),
             (not 0 < self.unary_floor < 1, "unary_floor must lie in (0, 1)"),
         ]
@@ -340,14 +354,64 @@ def _spectrum(surface: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:
     return descriptors.eigenpairs(shape.vertices, shape.faces, min(p.eigenpairs, len(shape.vertices) - 1))
 
 
+def _term_distances(
+    term: str, queries: list[tuple[Surface, np.ndarray]], tgt: Surface, pt: np.ndarray, p: Params,
+    spectrum: Callable[[Surface], tuple[np.ndarray, np.ndarray]],
+) -> list[np.ndarray]:
+    """Descriptor distances of one unary term from each query point set to the targets.
+
+    1 - NMI' for spin images (averaged over radii ``SPIN_SCALES`` for "spin-multi"), the
+    Euclidean distance of log signatures for "wks" and "hks", on the energy / time grid
+    of the first query's surface (the source), so that two shapes' signatures compare.
+
+    Returns
+    -------
+    list of (len(points), T) float64, one per ``(surface, points)`` of ``queries``.
+    """
+    if term in ("spin", "spin-multi"):
+        radii = [p.spin_radius * c for c in (SPIN_SCALES if term == "spin-multi" else (1.0,))]
+        images = [_spin(tgt, pt, p, r) for r in radii]
+        return [
+            1.0 - np.mean([descriptors.nmi(_spin(surface, points, p, r), b, p.spin_levels)
+                           for r, b in zip(radii, images)], axis=0).astype(np.float64)
+            for surface, points in queries
+        ]
+    grid = spectrum(queries[0][0])[0]
+    if term == "wks":
+        energies, sigma = descriptors.wks_energies(grid, p.energies)
+
+        def signature(surface: Surface, points: np.ndarray) -> np.ndarray:
+            ev, phi = spectrum(surface)
+            return descriptors.wave_kernel_signature(ev, phi[points], energies, sigma)
+    else:
+        times = descriptors.hks_times(grid, p.energies)
+
+        def signature(surface: Surface, points: np.ndarray) -> np.ndarray:
+            ev, phi = spectrum(surface)
+            return descriptors.heat_kernel_signature(ev, phi[points], times)
+    b = signature(tgt, pt)
+    return [cdist(signature(surface, points), b) for surface, points in queries]
+
+
+def _nearest_targets(surface: Surface, points: np.ndarray, pt: np.ndarray, k: int, spacing: float) -> np.ndarray:
+    """(len(points), k) the k targets geodesically nearest each point; -1 where fewer
+    than k lie within (k + 2) target spacings."""
+    dist = geodesics.distances_from(surface.graph, points, limit=(k + 2) * spacing)[:, pt]
+    k = min(k, len(pt))
+    near = np.argpartition(dist, k - 1, axis=1)[:, :k]
+    return np.where(np.isfinite(np.take_along_axis(dist, near, axis=1)), near, -1)
+
+
 def _unary(
-    src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params
+    src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params, spacing: float
 ) -> tuple[np.ndarray, float]:
     """Unary potentials of the terms named by ``p.unary`` and their floor.
 
-    Each term gives an (S, T) descriptor distance: 1 - NMI' for spin images (averaged
-    over radii for "spin-multi"), the Euclidean distance of log signatures for "wks" and
-    "hks"; ``p.potential`` maps them to potentials.
+    Each term gives an (S, T) descriptor distance (:func:`_term_distances`);
+    ``p.potential`` maps them to potentials. The "offset" calibration measures each
+    term's spread on true matches: from calibration points on the target shape (the
+    source samples when self-matching, else a Poisson sample of the same size) to the
+    ``OFFSET_TARGETS`` targets nearest them on the surface, ``spacing`` apart.
 
     Returns
     -------
@@ -355,35 +419,28 @@ def _unary(
     floor : float
         The smallest value the potential map can take.
     """
-    distances = []
-    spectra: list[tuple[np.ndarray, np.ndarray]] = []
-    for term in p.unary_terms:
-        if term in ("spin", "spin-multi"):
-            scales = SPIN_SCALES if term == "spin-multi" else (1.0,)
-            similarity = np.mean([
-                descriptors.nmi(_spin(src, ps, p, p.spin_radius * c), _spin(tgt, pt, p, p.spin_radius * c),
-                                p.spin_levels)
-                for c in scales
-            ], axis=0)
-            distances.append(1.0 - similarity.astype(np.float64))
-            continue
-        if not spectra:
-            spectra.append(_spectrum(src, p))
-            spectra.append(spectra[0] if tgt is src else _spectrum(tgt, p))
-        (ev_s, phi_s), (ev_t, phi_t) = spectra
-        # One energy / time grid, the source's, so that two shapes' signatures compare.
-        if term == "wks":
-            energies, sigma = descriptors.wks_energies(ev_s, p.energies)
-            a = descriptors.wave_kernel_signature(ev_s, phi_s[ps], energies, sigma)
-            b = descriptors.wave_kernel_signature(ev_t, phi_t[pt], energies, sigma)
-        else:
-            times = descriptors.hks_times(ev_s, p.energies)
-            a = descriptors.heat_kernel_signature(ev_s, phi_s[ps], times)
-            b = descriptors.heat_kernel_signature(ev_t, phi_t[pt], times)
-        distances.append(cdist(a, b))
+    spectra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray]:
+        if id(surface) not in spectra:
+            spectra[id(surface)] = _spectrum(surface, p)
+        return spectra[id(surface)]
+
+    offset = p.potential == "calibrated" and p.calibration != "descriptor"
+    queries = [(src, ps)]
+    if offset and tgt is not src:
+        queries.append((tgt, _sample(tgt, len(ps), None, p.seed + 2)))
+    per_term = [_term_distances(term, queries, tgt, pt, p, spectrum) for term in p.unary_terms]
+    distances = [d[0] for d in per_term]
     if p.potential == "paper":
         return model.nmi_potential(1.0 - distances[0], p.gamma), model.potential_floor(p.gamma)
-    return model.calibrated_potential(distances, p.calibration_k, p.unary_floor), p.unary_floor
+    scales = [0.0] * len(distances)
+    if offset:
+        near = _nearest_targets(tgt, queries[-1][1], pt, OFFSET_TARGETS, spacing)
+        scales = [model.descriptor_scale(d[-1], near=near) for d in per_term]
+    if p.calibration != "offset":
+        scales = [max(s, model.descriptor_scale(d, p.calibration_k)) for s, d in zip(scales, distances)]
+    return model.calibrated_potential(distances, scales, p.unary_floor), p.unary_floor
 
 
 @dataclass
@@ -530,7 +587,7 @@ def _solve(
     targets = geodesics.local_distances(tgt.graph, pt, float(edge_length.max() + delta))
     clock.lap("geodesics")
 
-    unary, floor = _unary(src, tgt, ps, pt, p)
+    unary, floor = _unary(src, tgt, ps, pt, p, t_spacing)
     clock.lap("descriptors")
     if self_match and p.remove_trivial and p.trivial_radius > 0:
         near = geodesics.distances_from(src.graph, ps, limit=p.trivial_radius)[:, pt]
