@@ -41,7 +41,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 #: Smallest fraction of the global symmetry's sample pairs that the seeded ZoomOut map
 #: must keep (:func:`intrinsym.extract.agreement`), else the extraction's map stays: a
-#: guard against ZoomOut drifting to another symmetry (measured on TOSCA / KIDS: 0.87-1.00).
+#: guard against ZoomOut drifting to another symmetry (measured on TOSCA / KIDS: 0.94-1.00).
 ZOOMOUT_AGREEMENT = 0.5
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
