@@ -31,6 +31,11 @@ phi(y)/sqrt(lambda)|`` (which an intrinsic isometry preserves exactly) wins. A c
 that ZoomOut turns back into all-plus signs on the sign-search eigenfunctions has become
 the identity (zero distortion) and is dropped.
 
+:func:`seeded_symmetry` skips the sign search: sparse correspondences of a known
+symmetry (the pipeline's global symmetry from the BP marginals) fit the first ``C`` and
+ZoomOut refines it, so the correspondences choose the symmetry and ZoomOut gives the
+precision.
+
 Everything is scale-free (eigenvalue gaps and distortions are relative, nearest
 neighbours do not depend on the embedding's scale) and deterministic (fixed start
 vector for the eigensolver, fixed farthest-point seed). An exactly symmetric shape with
@@ -295,7 +300,7 @@ def seeded_symmetry(
     evecs: np.ndarray,
     source: np.ndarray,
     target: np.ndarray,
-    k_seed: int = 10,
+    k_seed: int = 16,
     n_final: int = 50,
     n_samples: int = 500,
     n_targets: int = 3000,
