@@ -18,6 +18,7 @@ from intrinsym.extract import (
     Support,
     Symmetry,
     _merge,
+    agreement,
     complete,
     extract,
     fitted_vertex_map,
@@ -344,3 +345,20 @@ def test_refine_trilaterates_misplaced_samples():
     holes = slid.copy()
     holes[[2, 4]] = -1
     assert refine(GRAPH, TARGETS, holes, p, min_neighbours=2).tolist() == holes.tolist()
+
+
+def test_agreement_counts_the_pairs_a_vertex_map_keeps():
+    """Only pairs whose source vertex lands in the cell of a target sample within the
+    sparse radius (here 0.3, the samples are 0.25 apart) of the pair's target count."""
+    sym, support, _, _, truth, sample_vertex = plane_mirror()
+    t = support.targets
+    near = t.dist <= 0.3
+    indptr = np.r_[0, np.cumsum(np.add.reduceat(near, t.indptr[:-1]))]
+    support = Support(support.edge_length, SparseDistances(indptr, t.indices[near], t.dist[near], 0.3),
+                      support.vertex_source, support.vertex_target, True)
+    assert agreement(sym, truth, sample_vertex, support) == 1.0
+    # the identity keeps the mirror only on its fixed line x = 0.5: 5 of the 25 samples
+    assert agreement(sym, np.arange(len(truth)), sample_vertex, support) == pytest.approx(5 / 25)
+    assert agreement(sym, np.full(len(truth), -1), sample_vertex, support) == 0.0
+    assert agreement(Symmetry(np.zeros(0, np.int64), np.zeros(0, np.int64), 0.0, 1.0, "partial"), truth,
+                     sample_vertex, support) == 1.0

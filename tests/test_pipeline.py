@@ -1,5 +1,6 @@
 """End-to-end detect / match on small problems: contracts, determinism, scale-freedom."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -52,8 +53,28 @@ def test_result_contract(spot, spot_result, tmp_path):
     with np.load(out / "result.npz") as z:
         # one shape: its input vertices are stored once, as source_vertices
         assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS
-                                         + ("source_vertices",))
+                                         + ("source_vertices", "global_map"))
     assert np.array_equal(again.support.target_vertices, r.support.target_vertices)
+
+
+def test_global_map_by_seeded_zoomout(spot, spot_result, tmp_path):
+    r = spot_result
+    assert r.extraction.global_index >= 0 and r.info["zoomout"]["used"]
+    assert r.info["zoomout"]["agreement"] >= pipeline.ZOOMOUT_AGREEMENT
+    assert r.global_map.shape == (len(spot.vertices),) and r.global_map.dtype == np.int64
+    assert r.global_map.min() >= 0 and np.mean(r.global_map == np.arange(len(spot.vertices))) < 0.05
+    out = r.save(tmp_path / "zoomout")
+    assert np.array_equal(np.load(out / "symmetry_map.npy"), r.global_map)
+    assert np.array_equal(pipeline.Result.load(out).global_map, r.global_map)
+    # without it, symmetry_map.npy is the extraction's map of the same symmetry
+    plain = dataclasses.replace(r, global_map=None).save(tmp_path / "plain")
+    g = r.extraction.symmetries[r.extraction.global_index]
+    cells = pipeline.extract.vertex_map(g, r.support.vertex_source, r.target_vertex, len(r.marginals))
+    assert np.array_equal(np.load(plain / "symmetry_map.npy"), cells)
+    assert pipeline.Result.load(plain).global_map is None
+    # the seeded map lands where the extraction's does (within a sample spacing, ~0.16)
+    gap = np.linalg.norm(spot.vertices[r.global_map] - spot.vertices[cells], axis=1) / r.info["resolved"]["scale"]
+    assert np.median(gap) < 0.1
 
 
 def test_deterministic_for_a_seed(spot, spot_result):
@@ -106,6 +127,9 @@ def test_paper_preset():
     assert not p.unary_seeds and not p.extraction().unary_seeds
     assert pipeline.make_params().extraction().unary_seeds
     assert p.extraction().vertex_fit == 0 and pipeline.make_params(vertex_fit=0.5).extraction().vertex_fit == 0.5
+    assert not p.zoomout and pipeline.make_params().zoomout
+    with pytest.raises(intrinsym.ParameterError, match="zoomout_seed"):
+        pipeline.make_params(zoomout_seed=60)
     with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
         pipeline.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):
@@ -135,6 +159,7 @@ def test_match_two_shapes():
     moved = Shape(a.vertices @ rot.T * 3.0, a.faces)
     r = intrinsym.match(a, moved, n_source=30, n_target=1500, spin_radius=0.2, spin_cloud=20000, iterations=10)
     assert r.marginals.shape == (30, 1500)
+    assert r.global_map is None and "zoomout" not in r.info
     assert r.info["mode"] == "match"
     # a rotated, scaled copy: the MAP target of most source points is its own image
     image = a.vertices[r.source_vertex] @ rot.T * 3.0

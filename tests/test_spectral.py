@@ -105,3 +105,38 @@ def test_spectral_symmetry_on_tosca_wolf():
     assert len(cleaned.vertices) == len(shape.vertices) and np.array_equal(vertex_map, np.arange(len(sym)))
     image = spectral.spectral_symmetry(cleaned.vertices, cleaned.faces)
     assert evaluate.score_map(image, shape, sym).within(0.10) > 0.95
+
+
+def test_seeded_symmetry_refines_sparse_noisy_pairs(mirror):
+    from intrinsym import descriptors
+
+    v, f, sym = mirror
+    _, evecs = descriptors.eigenpairs(v, f, 31)
+    rng = np.random.default_rng(7)
+    source = np.arange(0, len(v), 40)
+    # images only as precise as a sparse sampling (a random vertex within 0.1 of the
+    # true one), and one pair in ten wrong
+    near = cKDTree(v).query_ball_point(v[sym[source]], 0.1)
+    target = np.array([rng.choice(n) for n in near])
+    wrong = rng.random(len(source)) < 0.1
+    target[wrong] = rng.integers(0, len(v), wrong.sum())
+    image = spectral.seeded_symmetry(v, evecs, source, target, k_seed=6, n_final=30)
+    assert image.dtype == np.int64 and image.shape == (len(v),)
+    scores = best_score(image, v, f, [sym])
+    assert scores.within(0.05) > 0.99 and scores.mean_error < 0.01
+    with pytest.raises(ValueError, match="k_seed"):
+        spectral.seeded_symmetry(v, evecs, source[:5], target[:5], k_seed=6)
+
+
+def test_seeded_symmetry_keeps_the_seeded_one_of_several_symmetries():
+    """On an ellipsoid with seven symmetries, the pairs pick which one comes out."""
+    from intrinsym import descriptors
+
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    v = sphere.vertices * [1.0, 1.6, 2.5]
+    _, evecs = descriptors.eigenpairs(v, sphere.faces, 31)
+    source = np.arange(0, len(v), 20)
+    for flip in ([1, 0, 0], [0, 1, 0], [1, 1, 0], [1, 1, 1]):
+        truth = cKDTree(v).query(v * (1 - 2 * np.array(flip)))[1]
+        image = spectral.seeded_symmetry(v, evecs, source, truth[source], k_seed=6, n_final=30)
+        assert evaluate.score_map(image, mesh.from_arrays(v, sphere.faces), truth).within(0.05) > 0.99

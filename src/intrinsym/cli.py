@@ -82,6 +82,10 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
                        help="keep the trivial (identity) match in the model, as the paper does")
     p.add_argument("--unary-seeds", dest="unary_seeds", action=argparse.BooleanOptionalAction, default=None,
                    help="extraction: also grow symmetries from the unary's peaks (default on; off with --preset paper)")
+    if self_match:
+        p.add_argument("--zoomout", dest="zoomout", action=argparse.BooleanOptionalAction, default=None,
+                       help="global map (symmetry_map.npy): the global symmetry's sample pairs refined by ZoomOut "
+                            "in the Laplace-Beltrami eigenfunctions (default on; off with --preset paper)")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
     p.add_argument("--figures", action="store_true", help="also write the PNGs of 'intrinsym render' to OUT/figures")
@@ -183,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _overrides(args: argparse.Namespace) -> dict:
-    names = [dest for _, dest, _, _ in MODEL_OPTIONS] + ["remove_trivial", "unary_seeds"]
+    names = [dest for _, dest, _, _ in MODEL_OPTIONS] + ["remove_trivial", "unary_seeds", "zoomout"]
     return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
 
 

@@ -786,6 +786,35 @@ def vertex_map(symmetry: Symmetry, vertex_source: np.ndarray, target_vertex: np.
     return np.where(sample >= 0, np.asarray(target_vertex)[np.maximum(sample, 0)], -1).astype(np.int64)
 
 
+def agreement(symmetry: Symmetry, vertex_image: np.ndarray, source_vertex: np.ndarray, support: Support) -> float:
+    """How far a vertex map keeps a symmetry's sample pairs.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    vertex_image : (N_a,) int64
+        Target input vertex of every source input vertex (-1 where none).
+    source_vertex : (S,) int64
+        Input vertex of every source sample.
+    support : Support
+
+    Returns
+    -------
+    float
+        Fraction of the pairs s -> t of ``symmetry`` whose source vertex the map sends
+        into the Voronoi cell of a target sample within ``support.targets.radius`` of t
+        (geodesic); 1.0 for an empty symmetry.
+    """
+    if not len(symmetry.source):
+        return 1.0
+    t = support.targets
+    image = np.asarray(vertex_image)[np.asarray(source_vertex)[symmetry.source]]
+    owner = np.where(image >= 0, np.asarray(support.vertex_target)[np.maximum(image, 0)], -1)
+    kept = [b >= 0 and _find(t.indptr, t.indices, t.dist, a, b, t.radius) <= t.radius
+            for a, b in zip(symmetry.target, owner)]
+    return float(np.mean(kept))
+
+
 def _members(owner: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Indices grouped by owner: ``order[bounds[i]:bounds[i + 1]]`` are those with
     ``owner == i`` (entries -1 belong to none)."""

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
-from . import bp, descriptors, extract, geodesics, mesh, model, sampling
+from . import bp, descriptors, extract, geodesics, mesh, model, sampling, spectral
 from .files import atomic_write
 
 class ParameterError(ValueError):
@@ -36,9 +36,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     # paper's behaviour (BP converging in a handful of iterations, sharpening the unary
     # rather than smearing it); 1.5 spacings measured a far weaker model on TOSCA cat0.
     "paper": dict(rho=0.4, gamma=0.01, schedule="serial", iterations=100, remove_trivial=False, tolerance=0.5,
-                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0),
+                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0, zoomout=False),
 }
 
+#: Smallest fraction of the global symmetry's sample pairs that the seeded ZoomOut map
+#: must keep (:func:`intrinsym.extract.agreement`), else the extraction's map stays: a
+#: guard against ZoomOut drifting to another symmetry (measured on TOSCA / KIDS: 0.94-1.00).
+ZOOMOUT_AGREEMENT = 0.5
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
 #: Similarity-to-potential maps: Eq. 5 with gamma, or calibrated Gaussians.
@@ -138,6 +142,14 @@ class Params:
         Largest relative residual of the local linear fits that extend the global map
         to the input vertices (``symmetry_map.npy``); 0 gives each vertex its sample's
         image (beyond the paper; :func:`intrinsym.extract.fitted_vertex_map`).
+    zoomout : bool
+        Self-matching: the global map of the input vertices (``symmetry_map.npy``) is
+        the global symmetry's sample pairs refined by ZoomOut in the Laplace-Beltrami
+        eigenfunctions (:func:`intrinsym.spectral.seeded_symmetry`, the first
+        ``zoomout_seed`` of them fitted to the pairs, up to ``zoomout_final``), instead of
+        the extraction's cell map; ignores ``vertex_fit`` (beyond the paper).
+    zoomout_seed, zoomout_final : int
+        Eigenfunctions of the seed and of the last ZoomOut level.
     """
 
     n_source: int | None = 250
@@ -172,6 +184,9 @@ class Params:
     d_error: float = extract.ExtractParams.d_error
     unary_seeds: bool = True
     vertex_fit: float = extract.ExtractParams.vertex_fit
+    zoomout: bool = True
+    zoomout_seed: int = 16
+    zoomout_final: int = 50
 
     def __post_init__(self) -> None:
         checks = [
@@ -202,6 +217,7 @@ class Params:
             (self.calibration not in CALIBRATIONS, f"calibration must be one of {CALIBRATIONS}"),
             (self.calibration_k < 1, "calibration_k must be at least 1"),
             (not 0 < self.unary_floor < 1, "unary_floor must lie in (0, 1)"),
+            (not 1 <= self.zoomout_seed <= self.zoomout_final, "need 1 <= zoomout_seed <= zoomout_final"),
         ]
         for bad, message in checks:
             if bad:
@@ -348,15 +364,30 @@ def _spin(surface: Surface, vertices: np.ndarray, p: Params, radius: float) -> n
     return descriptors.quantize(images, p.spin_levels)
 
 
-def _spectrum(surface: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:
-    """Laplace-Beltrami eigenpairs of the working shape: (K,) values, (N, K) vectors."""
+def _spectrum(surface: Surface, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Laplace-Beltrami eigenpairs of the working shape: (K,) values, (N, K) vectors,
+    K = ``k`` (at most N - 1)."""
     shape = surface.shape
-    return descriptors.eigenpairs(shape.vertices, shape.faces, min(p.eigenpairs, len(shape.vertices) - 1))
+    return descriptors.eigenpairs(shape.vertices, shape.faces, min(k, len(shape.vertices) - 1))
+
+
+Spectrum = tuple[np.ndarray, np.ndarray]
+
+
+def _spectra(src: Surface, tgt: Surface, p: Params, self_match: bool) -> tuple[Spectrum, Spectrum] | None:
+    """Eigenpairs of source and target, computed once for the unary's "wks" / "hks"
+    terms (``p.eigenpairs``) and the seeded ZoomOut (``p.zoomout_final`` + 1 at least);
+    None when neither needs them."""
+    spectral_terms = bool({"wks", "hks"} & set(p.unary_terms))
+    if not spectral_terms and not (self_match and p.zoomout):
+        return None
+    a = _spectrum(src, p.eigenpairs if spectral_terms else p.zoomout_final + 1)
+    return a, (a if tgt is src else _spectrum(tgt, p.eigenpairs))
 
 
 def _term_distances(
     term: str, queries: list[tuple[Surface, np.ndarray]], tgt: Surface, pt: np.ndarray, p: Params,
-    spectrum: Callable[[Surface], tuple[np.ndarray, np.ndarray]],
+    spectrum: Callable[[Surface], Spectrum],
 ) -> list[np.ndarray]:
     """Descriptor distances of one unary term from each query point set to the targets.
 
@@ -403,11 +434,13 @@ def _nearest_targets(surface: Surface, points: np.ndarray, pt: np.ndarray, k: in
 
 
 def _unary(
-    src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params, spacing: float
+    src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params,
+    spectra: tuple[Spectrum, Spectrum] | None, spacing: float,
 ) -> tuple[np.ndarray, float]:
     """Unary potentials of the terms named by ``p.unary`` and their floor.
 
-    Each term gives an (S, T) descriptor distance (:func:`_term_distances`);
+    Each term gives an (S, T) descriptor distance (:func:`_term_distances`; "wks" and
+    "hks" use ``spectra``, the eigenpairs of source and target, see :func:`_spectra`);
     ``p.potential`` maps them to potentials. The "offset" calibration measures each
     term's spread on true matches: from calibration points on the target shape (the
     source samples when self-matching, else a Poisson sample of the same size) to the
@@ -419,12 +452,8 @@ def _unary(
     floor : float
         The smallest value the potential map can take.
     """
-    spectra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-
-    def spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray]:
-        if id(surface) not in spectra:
-            spectra[id(surface)] = _spectrum(surface, p)
-        return spectra[id(surface)]
+    def spectrum(surface: Surface) -> Spectrum:
+        return spectra[0] if surface is src else spectra[1]
 
     offset = p.potential == "calibrated" and p.calibration != "descriptor"
     queries = [(src, ps)]
@@ -469,6 +498,10 @@ class Result:
         :attr:`extract.Support.KEYS`).
     extraction : extract.Extraction or None
         Symmetries (``symmetries.json``) and the global one (``symmetry_map.npy``).
+    global_map : (N_in,) int64 or None
+        Image of every input vertex under the global symmetry when detection refined it
+        (``Params.zoomout``); None: ``symmetry_map.npy`` is the extraction's
+        (:func:`intrinsym.extract.fitted_vertex_map`). Stored in ``result.npz``.
     """
 
     source_points: np.ndarray
@@ -482,6 +515,7 @@ class Result:
     info: dict = field(default_factory=dict)
     support: extract.Support | None = None
     extraction: extract.Extraction | None = None
+    global_map: np.ndarray | None = None
 
     ARRAYS = ("source_points", "target_points", "source_vertex", "target_vertex", "edges", "unary", "marginals")
 
@@ -493,6 +527,8 @@ class Result:
         arrays = {name: getattr(self, name) for name in self.ARRAYS}
         if self.support is not None:
             arrays.update(self.support.to_arrays())
+        if self.global_map is not None:
+            arrays["global_map"] = np.asarray(self.global_map, dtype=np.int64)
         run = {"params": dataclasses.asdict(self.params), **self.info}
         atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
         atomic_write(out / "run.json", lambda f: json.dump(run, f, indent=2))
@@ -502,7 +538,7 @@ class Result:
             atomic_write(out / "symmetries.json", lambda f: json.dump(listed, f))
             n_in = len(self.support.vertex_source)
             g = self.extraction.global_index
-            vmap = (np.full(n_in, -1, dtype=np.int64) if g < 0 else
+            vmap = (np.full(n_in, -1, dtype=np.int64) if g < 0 else self.global_map if self.global_map is not None else
                     extract.fitted_vertex_map(found[g], self.support, self.edges, self.source_points,
                                               self.target_points, self.target_vertex, self.extraction.params))
             atomic_write(out / "symmetry_map.npy", lambda f: np.save(f, vmap), binary=True)
@@ -517,9 +553,10 @@ class Result:
             has_support = all(key in z.files for key in extract.Support.KEYS)
             keys = extract.Support.KEYS + tuple(k for k in extract.Support.OPTIONAL_KEYS if k in z.files)
             support = extract.Support.from_arrays({k: z[k] for k in keys}) if has_support else None
+            global_map = z["global_map"] if "global_map" in z.files else None
         run = json.loads((out / "run.json").read_text())
         params = Params(**run.pop("params"))
-        return cls(**arrays, params=params, info=run, support=support)
+        return cls(**arrays, params=params, info=run, support=support, global_map=global_map)
 
 
 def _versions() -> dict[str, str]:
@@ -587,7 +624,8 @@ def _solve(
     targets = geodesics.local_distances(tgt.graph, pt, float(edge_length.max() + delta))
     clock.lap("geodesics")
 
-    unary, floor = _unary(src, tgt, ps, pt, p, t_spacing)
+    spectra = _spectra(src, tgt, p, self_match)
+    unary, floor = _unary(src, tgt, ps, pt, p, spectra, t_spacing)
     clock.lap("descriptors")
     if self_match and p.remove_trivial and p.trivial_radius > 0:
         near = geodesics.distances_from(src.graph, ps, limit=p.trivial_radius)[:, pt]
@@ -618,6 +656,13 @@ def _solve(
         res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary
     )
     clock.lap("extract")
+    source_vertex = src.nearest_input_vertex(src.shape.vertices[ps])
+    global_map, zoomout = None, {}
+    if self_match and p.zoomout and extraction.global_index >= 0:
+        global_map, kept = seeded_global_map(src, ps, pt, source_vertex, extraction.symmetries[extraction.global_index],
+                                             support, spectra[0][1], p)
+        zoomout = {"zoomout": {"agreement": kept, "used": global_map is not None}}
+        clock.lap("zoomout")
     info = {
         "sizes": {
             "source": int(len(ps)),
@@ -648,12 +693,13 @@ def _solve(
             "setup_seconds": res.setup_seconds,
             "message_updates": int(sum(res.updates)),
         },
+        **zoomout,
         "versions": _versions(),
     }
     return Result(
         source_points=src.to_input(src.shape.vertices[ps]),
         target_points=tgt.to_input(tgt.shape.vertices[pt]),
-        source_vertex=src.nearest_input_vertex(src.shape.vertices[ps]),
+        source_vertex=source_vertex,
         target_vertex=tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
         edges=edges.astype(np.int64),
         unary=unary,
@@ -662,7 +708,53 @@ def _solve(
         info=info,
         support=support,
         extraction=extraction,
+        global_map=global_map,
     )
+
+
+def seeded_global_map(
+    surface: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
+    source_vertex: np.ndarray,
+    symmetry: extract.Symmetry,
+    support: extract.Support,
+    evecs: np.ndarray,
+    p: Params,
+) -> tuple[np.ndarray | None, float]:
+    """The global symmetry of a self-matching run refined by seeded ZoomOut.
+
+    The symmetry's sample pairs seed :func:`intrinsym.spectral.seeded_symmetry` on the
+    working shape; its map goes back to the input vertices (nearest input vertex) and
+    is kept when it sends at least ``ZOOMOUT_AGREEMENT`` of the pairs near their
+    targets (:func:`intrinsym.extract.agreement`).
+
+    Parameters
+    ----------
+    surface : Surface
+    ps, pt : (S,), (T,) int64
+        Working vertices of the source and target samples.
+    source_vertex : (S,) int64
+        Input vertex of every source sample.
+    symmetry : extract.Symmetry
+        The global symmetry (sample indices).
+    support : extract.Support
+    evecs : (N, K) float array
+        Laplace-Beltrami eigenfunctions of the working shape, constant first.
+    p : Params
+
+    Returns
+    -------
+    global_map : (N_in,) int64 or None
+        Image of every input vertex; None when the guard rejects the map.
+    agreement : float
+    """
+    vertices = surface.shape.vertices
+    image = spectral.seeded_symmetry(vertices, evecs, ps[symmetry.source], pt[symmetry.target], p.zoomout_seed,
+                                     p.zoomout_final)
+    global_map = surface.nearest_input_vertex(vertices[image[surface.vertex_map]])
+    kept = extract.agreement(symmetry, global_map, source_vertex, support)
+    return (global_map if kept >= ZOOMOUT_AGREEMENT else None), kept
 
 
 def _min_vertices(p: Params) -> int:

@@ -31,6 +31,11 @@ phi(y)/sqrt(lambda)|`` (which an intrinsic isometry preserves exactly) wins. A c
 that ZoomOut turns back into all-plus signs on the sign-search eigenfunctions has become
 the identity (zero distortion) and is dropped.
 
+:func:`seeded_symmetry` skips the sign search: sparse correspondences of a known
+symmetry (the pipeline's global symmetry from the BP marginals) fit the first ``C`` and
+ZoomOut refines it, so the correspondences choose the symmetry and ZoomOut gives the
+precision.
+
 Everything is scale-free (eigenvalue gaps and distortions are relative, nearest
 neighbours do not depend on the embedding's scale) and deterministic (fixed start
 vector for the eigensolver, fixed farthest-point seed). An exactly symmetric shape with
@@ -47,7 +52,8 @@ from scipy.spatial.distance import pdist
 
 from . import descriptors, sampling
 
-__all__ = ["distortion", "isolated_eigenvalues", "sign_candidates", "spectral_symmetry", "zoomout"]
+__all__ = ["distortion", "isolated_eigenvalues", "nearest_images", "seeded_symmetry", "sign_candidates",
+           "spectral_symmetry", "zoomout"]
 
 
 def isolated_eigenvalues(evals: np.ndarray, count: int, min_gap: float = 0.05) -> np.ndarray:
@@ -110,6 +116,27 @@ def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarra
     return signs[best], residuals[best]
 
 
+def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """The point map of a functional map: each source row to the nearest target row.
+
+    Parameters
+    ----------
+    source : (S, K) float array
+        Basis (eigenfunctions) at the points being mapped, K >= k.
+    target : (T, K) float array
+        The same basis at the candidate images.
+    C : (k, k) float array
+        Functional map in the first k basis functions (``target[T(x), :k] ~ source[x, :k] C``).
+
+    Returns
+    -------
+    (S,) int64
+        Row of ``target`` nearest to ``source[x, :k] C`` for every source row x.
+    """
+    k = len(C)
+    return cKDTree(np.asarray(target)[:, :k]).query(np.asarray(source)[:, :k] @ C)[1].astype(np.int64)
+
+
 def zoomout(
     source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -148,8 +175,8 @@ def zoomout(
     r_inv = solve_triangular(r, np.eye(len(r)))
     for k in range(k_start, src.shape[1] + 1):
         C = r_inv[:k, :k] @ (q[:, :k].T @ tgt[images, :k])
-        images = cKDTree(tgt[:, :k]).query(src[:, :k] @ C)[1]
-    return images.astype(np.int64), C
+        images = nearest_images(src, tgt, C)
+    return images, C
 
 
 def distortion(embedding: np.ndarray, images: np.ndarray) -> float:
@@ -172,6 +199,20 @@ def distortion(embedding: np.ndarray, images: np.ndarray) -> float:
     before = pdist(np.asarray(embedding, dtype=np.float64))
     after = pdist(np.asarray(images, dtype=np.float64))
     return float(np.abs(after - before).mean() / before.mean())
+
+
+def _spread(vertices: np.ndarray, n_samples: int, n_targets: int, n_final: int) -> tuple[np.ndarray, int]:
+    """Farthest-point targets of ZoomOut, the first ``n_samples`` of them its samples.
+
+    Returns the (n_targets,) int64 target vertices and ``n_samples``, both clamped to the
+    vertex count (farthest-point sampling is greedy: a prefix is evenly spread too).
+    Raises ValueError when fewer than ``n_final`` samples are left.
+    """
+    n_targets = min(max(n_targets, n_samples), len(vertices))
+    n_samples = min(n_samples, n_targets)
+    if n_samples < n_final:
+        raise ValueError(f"n_samples ({n_samples}) must be at least n_final ({n_final})")
+    return sampling.farthest_point_sampling(vertices, n_targets), n_samples
 
 
 def spectral_symmetry(
@@ -227,17 +268,13 @@ def spectral_symmetry(
         of range, or every candidate refines to the identity (no symmetry found).
     """
     v = np.asarray(vertices, dtype=np.float64)
-    n_targets = min(max(n_targets, n_samples), len(v))
-    n_samples = min(n_samples, n_targets)
-    if n_samples < n_final:
-        raise ValueError(f"n_samples ({n_samples}) must be at least n_final ({n_final})")
+    spread, n_samples = _spread(v, n_samples, n_targets, n_final)
     evals, evecs = descriptors.eigenpairs(v, faces, n_final + 1)
     phi = evecs[:, 1:]
     chosen = isolated_eigenvalues(evals[1:], n_signs, min_gap)
     if len(chosen) == 0:
         raise ValueError(f"no eigenvalue among the first {n_final} is isolated by {min_gap}")
-    # farthest-point sampling is greedy: the first n_samples targets are the samples
-    targets = phi[sampling.farthest_point_sampling(v, n_targets)]
+    targets = phi[spread]
     samples = targets[:n_samples]
     signs, _ = sign_candidates(samples[:, chosen], n_candidates)
     commute = targets / np.sqrt(evals[1:])
@@ -255,4 +292,61 @@ def spectral_symmetry(
             best, best_distortion = C, score
     if best is None:
         raise ValueError(f"all {len(signs)} candidate sign vectors refine to the identity")
-    return cKDTree(phi).query(phi @ best)[1].astype(np.int64)
+    return nearest_images(phi, phi, best)
+
+
+def seeded_symmetry(
+    vertices: np.ndarray,
+    evecs: np.ndarray,
+    source: np.ndarray,
+    target: np.ndarray,
+    k_seed: int = 16,
+    n_final: int = 50,
+    n_samples: int = 500,
+    n_targets: int = 3000,
+) -> np.ndarray:
+    """A self-map from sparse correspondences, refined by ZoomOut to vertex precision.
+
+    The correspondences choose the symmetry, ZoomOut gives the precision: the functional
+    map ``C`` (k_seed x k_seed) is the least-squares solution of ``phi[target, :k_seed]
+    ~ phi[source, :k_seed] C``, it maps the ``n_samples`` farthest-point samples into
+    the ``n_targets`` farthest-point targets, ZoomOut refines from ``k_seed`` to
+    ``n_final`` eigenfunctions (:func:`zoomout`), and its last ``C`` maps every vertex.
+    A small ``k_seed`` averages out the correspondences' errors (a few wrong pairs, or
+    images only as precise as a sampling) but must resolve the symmetry.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+        Positions, any length unit.
+    evecs : (N, K) float array
+        Laplace-Beltrami eigenfunctions, ascending eigenvalue, the constant mode first
+        (as :func:`intrinsym.descriptors.eigenpairs` returns them), K > k_seed.
+    source, target : (P,) int arrays
+        Vertex pairs ``source[i] -> target[i]`` of the symmetry, P >= k_seed.
+    k_seed : int
+        Eigenfunctions (besides the constant) of the seed's functional map.
+    n_final : int
+        Eigenfunctions of the last ZoomOut level, at most K - 1 (fewer are clamped).
+    n_samples, n_targets : int
+        As in :func:`spectral_symmetry`.
+
+    Returns
+    -------
+    (N,) int64
+        Image of every vertex under the seeded symmetry, at vertex precision; raises
+        ValueError if there are fewer pairs than ``k_seed`` or the sizes are out of range.
+    """
+    n_final = min(n_final, evecs.shape[1] - 1)
+    source = np.asarray(source, dtype=np.int64)
+    target = np.asarray(target, dtype=np.int64)
+    if not 1 <= k_seed <= n_final or len(source) < k_seed or len(source) != len(target):
+        raise ValueError(f"need 1 <= k_seed ({k_seed}) <= n_final ({n_final}) and at least k_seed pairs, "
+                         f"got {len(source)} sources and {len(target)} targets")
+    spread, n_samples = _spread(np.asarray(vertices, dtype=np.float64), n_samples, n_targets, n_final)
+    phi = np.asarray(evecs, dtype=np.float64)[:, 1 : n_final + 1]
+    C = np.linalg.lstsq(phi[source, :k_seed], phi[target, :k_seed], rcond=None)[0]
+    targets = phi[spread]
+    samples = targets[:n_samples]
+    _, C = zoomout(samples, targets, nearest_images(samples, targets, C), k_seed)
+    return nearest_images(phi, phi, C)
