@@ -159,7 +159,8 @@ def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: 
     """Segmentation scores of the extracted symmetry that best realises ``truth``.
 
     Every extracted symmetry is extended to the input vertices as ``symmetry_map.npy``
-    is (:func:`intrinsym.extract.fitted_vertex_map`) and scored with
+    is (the global one by seeded ZoomOut when the run made that map, the others by
+    :func:`intrinsym.extract.fitted_vertex_map`) and scored with
     :func:`intrinsym.evaluate.segmentation_scores`; the one with the best mean score is
     the pipeline's version of the principal map.
 
@@ -172,8 +173,11 @@ def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: 
     """
     best, best_index = {}, -1
     for i, sym in enumerate(result.extraction.symmetries):
-        vmap = extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
-                                         result.target_points, result.target_vertex, result.params.extraction())
+        if i == result.extraction.global_index and result.global_map is not None:
+            vmap = result.global_map
+        else:
+            vmap = extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
+                                             result.target_points, result.target_vertex, result.params.extraction())
         scores = evaluate.segmentation_scores(vmap, truth, labels)
         if not best or np.mean(list(scores.values())) > np.mean(list(best.values())):
             best, best_index = scores, i

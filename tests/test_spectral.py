@@ -47,6 +47,15 @@ def test_distortion_is_zero_for_isometries_only():
     assert spectral.distortion(points, np.repeat(points[:20], 2, axis=0)) > 0.2  # a fold
 
 
+def test_nearest_images_is_the_exact_nearest_neighbour():
+    rng = np.random.default_rng(3)
+    source, target = rng.normal(size=(700, 12)), rng.normal(size=(1500, 12))
+    C = np.linalg.qr(rng.normal(size=(10, 10)))[0]
+    expected = cKDTree(target[:, :10]).query(source[:, :10] @ C)[1]
+    # chunks of 256 rows cover the last partial chunk too
+    np.testing.assert_array_equal(spectral.nearest_images(source, target, C, chunk=256), expected)
+
+
 def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror):
     from intrinsym import descriptors
 
