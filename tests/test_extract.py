@@ -310,7 +310,7 @@ def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
     sample = 3
     vertex = int(result.source_vertex[sample])
     expected = from_result(result.marginals, result.edges, result.support, result.source_points,
-                           result.target_points, result.params.extraction(), source=sample)
+                           result.target_points, result.params.extraction(), source=sample, unary=result.unary)
     capsys.readouterr()
     assert cli.main(["query", str(out), "--vertex", str(vertex), "--json"]) == 0
     answer = json.loads(capsys.readouterr().out)
