@@ -170,7 +170,7 @@ class Params:
     damping: float = 0.0
     backend: str = "auto"
     remove_trivial: bool = True
-    trivial_radius: float = 0.05
+    trivial_radius: float = 0.08
     seed: int = 0
     dtype: str = "float32"
     unary: str = "wks*spin"
