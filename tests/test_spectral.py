@@ -133,6 +133,14 @@ def test_seeded_symmetry_refines_sparse_noisy_pairs(mirror):
     assert image.dtype == np.int64 and image.shape == (len(v),)
     scores = best_score(image, v, f, [sym])
     assert scores.within(0.05) > 0.99 and scores.mean_error < 0.01
+    # a subset of points mapped onto a subset of candidates: the nearest candidate
+    # in the final spectral embedding, the same map where the candidate set is whole
+    points, candidates = np.arange(0, len(v), 3), np.arange(1, len(v), 2)
+    part = spectral.seeded_symmetry(v, evecs, source, target, k_seed=6, n_final=30, points=points)
+    np.testing.assert_array_equal(part, image[points])
+    sub = spectral.seeded_symmetry(v, evecs, source, target, k_seed=6, n_final=30, candidates=candidates)
+    assert set(sub.tolist()) <= set(candidates.tolist())
+    assert np.mean(np.linalg.norm(v[sub] - v[image], axis=1)) < 0.05
     with pytest.raises(ValueError, match="k_seed"):
         spectral.seeded_symmetry(v, evecs, source[:5], target[:5], k_seed=6)
 

@@ -750,9 +750,11 @@ def seeded_global_map(
     agreement : float
     """
     vertices = surface.shape.vertices
+    # only the working vertices of input vertices are mapped, onto those same vertices
     image = spectral.seeded_symmetry(vertices, evecs, ps[symmetry.source], pt[symmetry.target], p.zoomout_seed,
-                                     p.zoomout_final)
-    global_map = surface.nearest_input_vertex(vertices[image[surface.vertex_map]])
+                                     p.zoomout_final, points=surface.vertex_map,
+                                     candidates=np.unique(surface.vertex_map))
+    global_map = surface.nearest_input_vertex(vertices[image])
     kept = extract.agreement(symmetry, global_map, source_vertex, support)
     return (global_map if kept >= ZOOMOUT_AGREEMENT else None), kept
 

@@ -322,6 +322,8 @@ def seeded_symmetry(
     n_final: int = 50,
     n_samples: int = 500,
     n_targets: int = 3000,
+    points: np.ndarray | None = None,
+    candidates: np.ndarray | None = None,
 ) -> np.ndarray:
     """A self-map from sparse correspondences, refined by ZoomOut to vertex precision.
 
@@ -348,12 +350,17 @@ def seeded_symmetry(
         Eigenfunctions of the last ZoomOut level, at most K - 1 (fewer are clamped).
     n_samples, n_targets : int
         As in :func:`spectral_symmetry`.
+    points, candidates : int arrays, optional
+        Vertices to map (default: all) and the vertices their images are chosen from
+        (default: all). The last map costs len(points) x len(candidates) products: on
+        a subdivided working mesh, the input's own vertices are enough.
 
     Returns
     -------
-    (N,) int64
-        Image of every vertex under the seeded symmetry, at vertex precision; raises
-        ValueError if there are fewer pairs than ``k_seed`` or the sizes are out of range.
+    (len(points),) int64
+        Image of every mapped vertex (a vertex of ``candidates``) under the seeded
+        symmetry, at vertex precision; raises ValueError if there are fewer pairs than
+        ``k_seed`` or the sizes are out of range.
     """
     n_final = min(n_final, evecs.shape[1] - 1)
     source = np.asarray(source, dtype=np.int64)
@@ -367,4 +374,6 @@ def seeded_symmetry(
     targets = phi[spread]
     samples = targets[:n_samples]
     _, C = zoomout(samples, targets, nearest_images(samples, targets, C), k_seed)
-    return nearest_images(phi, phi, C)
+    points = np.arange(len(phi)) if points is None else np.asarray(points, dtype=np.int64)
+    candidates = np.arange(len(phi)) if candidates is None else np.asarray(candidates, dtype=np.int64)
+    return candidates[nearest_images(phi[points], phi[candidates], C)]
