@@ -597,14 +597,16 @@ def weight_polynomial(rho: float, tol: float = 2.0**-52) -> np.ndarray:
         Power-basis coefficients, constant term first.
     """
     rate = np.log(1.0 / rho**2)
+
+    def weight(u: np.ndarray) -> np.ndarray:
+        return np.exp(-rate * u) - rho**2
+
     t = np.linspace(0.0, 1.0, 4097)
-    exact = np.exp(-rate * t) - rho**2
     best, best_error = np.zeros(1), np.inf
     for degree in range(1, MAX_WEIGHT_DEGREE + 1):
-        coef = np.polynomial.Chebyshev.interpolate(
-            lambda u: np.exp(-rate * u) - rho**2, degree, domain=[0.0, 1.0]
-        ).convert(kind=np.polynomial.Polynomial).coef
-        error = np.abs(np.polynomial.polynomial.polyval(t, coef) - exact).max()
+        coef = np.polynomial.Chebyshev.interpolate(weight, degree, domain=[0.0, 1.0]).convert(
+            kind=np.polynomial.Polynomial).coef
+        error = np.abs(np.polynomial.polynomial.polyval(t, coef) - weight(t)).max()
         if error <= tol:
             return coef
         if error < best_error:

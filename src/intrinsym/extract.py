@@ -867,7 +867,7 @@ def fitted_vertex_map(
     graph = SourceGraph.from_edges(edges, support.edge_length, n_s)
     image = symmetry.image(n_s)
     cell_order, cell_bounds = _members(np.asarray(support.vertex_source), n_s)
-    owner = np.asarray(support.vertex_target)
+    target_order, target_bounds = _members(np.asarray(support.vertex_target), len(target_points))
     t = support.targets
     for s in np.flatnonzero(image >= 0):
         cell = cell_order[cell_bounds[s] : cell_bounds[s + 1]]
@@ -880,9 +880,8 @@ def fitted_vertex_map(
         lin = np.linalg.lstsq(d, e, rcond=None)[0]
         if np.max(np.linalg.norm(d @ lin - e, axis=1) / np.linalg.norm(d, axis=1)) > params.vertex_fit:
             continue
-        near = np.zeros(len(target_points) + 1, dtype=bool)
-        near[t.indices[t.indptr[image[s]] : t.indptr[image[s] + 1]]] = True
-        candidates = np.flatnonzero(near[owner])
+        nearby = t.indices[t.indptr[image[s]] : t.indptr[image[s] + 1]]
+        candidates = np.sort(np.concatenate([target_order[target_bounds[j] : target_bounds[j + 1]] for j in nearby]))
         y = target_points[image[s]] + (support.source_vertices[cell] - source_points[s]) @ lin
         out[cell] = candidates[cKDTree(support.target_vertices[candidates]).query(y)[1]]
     return out

@@ -424,18 +424,28 @@ def _term_distances(
     return [cdist(signature(surface, points), b) for surface, points in queries]
 
 
-def _nearest_targets(surface: Surface, points: np.ndarray, pt: np.ndarray, k: int, spacing: float) -> np.ndarray:
-    """(len(points), k) the k targets geodesically nearest each point; -1 where fewer
-    than k lie within (k + 2) target spacings."""
-    dist = geodesics.distances_from(surface.graph, points, limit=(k + 2) * spacing)[:, pt]
-    k = min(k, len(pt))
+def _near_targets(surface: Surface, points: np.ndarray, pt: np.ndarray, radius: float) -> np.ndarray:
+    """(len(points), T) geodesic distances from working vertices to the targets, inf
+    beyond ``radius``."""
+    return geodesics.distances_from(surface.graph, points, limit=radius)[:, pt]
+
+
+def _nearest_targets(dist: np.ndarray, k: int) -> np.ndarray:
+    """(m, k) the k targets nearest each row of ``dist`` ((m, T), inf where unknown);
+    -1 where fewer than k are within reach."""
+    k = min(k, dist.shape[1])
     near = np.argpartition(dist, k - 1, axis=1)[:, :k]
     return np.where(np.isfinite(np.take_along_axis(dist, near, axis=1)), near, -1)
 
 
+def _offset_calibrated(p: Params) -> bool:
+    """Whether the unary's widths use the "offset" rule (alone or in "both")."""
+    return p.potential == "calibrated" and p.calibration != "descriptor"
+
+
 def _unary(
     src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params,
-    spectra: tuple[Spectrum, Spectrum] | None, spacing: float,
+    spectra: tuple[Spectrum, Spectrum] | None, spacing: float, near_source: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float]:
     """Unary potentials of the terms named by ``p.unary`` and their floor.
 
@@ -444,7 +454,9 @@ def _unary(
     ``p.potential`` maps them to potentials. The "offset" calibration measures each
     term's spread on true matches: from calibration points on the target shape (the
     source samples when self-matching, else a Poisson sample of the same size) to the
-    ``OFFSET_TARGETS`` targets nearest them on the surface, ``spacing`` apart.
+    ``OFFSET_TARGETS`` targets nearest them on the surface, ``spacing`` apart. When
+    self-matching, ``near_source`` ((S, T), from :func:`_near_targets` out to at least
+    ``(OFFSET_TARGETS + 2) * spacing``) gives the source samples' distances to them.
 
     Returns
     -------
@@ -455,7 +467,7 @@ def _unary(
     def spectrum(surface: Surface) -> Spectrum:
         return spectra[0] if surface is src else spectra[1]
 
-    offset = p.potential == "calibrated" and p.calibration != "descriptor"
+    offset = _offset_calibrated(p)
     queries = [(src, ps)]
     if offset and tgt is not src:
         queries.append((tgt, _sample(tgt, len(ps), None, p.seed + 2)))
@@ -465,7 +477,9 @@ def _unary(
         return model.nmi_potential(1.0 - distances[0], p.gamma), model.potential_floor(p.gamma)
     scales = [0.0] * len(distances)
     if offset:
-        near = _nearest_targets(tgt, queries[-1][1], pt, OFFSET_TARGETS, spacing)
+        if near_source is None or tgt is not src:
+            near_source = _near_targets(tgt, queries[-1][1], pt, (OFFSET_TARGETS + 2) * spacing)
+        near = _nearest_targets(near_source, OFFSET_TARGETS)
         scales = [model.descriptor_scale(d[-1], near=near) for d in per_term]
     if p.calibration != "offset":
         scales = [max(s, model.descriptor_scale(d, p.calibration_k)) for s, d in zip(scales, distances)]
@@ -538,9 +552,13 @@ class Result:
             atomic_write(out / "symmetries.json", lambda f: json.dump(listed, f))
             n_in = len(self.support.vertex_source)
             g = self.extraction.global_index
-            vmap = (np.full(n_in, -1, dtype=np.int64) if g < 0 else self.global_map if self.global_map is not None else
-                    extract.fitted_vertex_map(found[g], self.support, self.edges, self.source_points,
-                                              self.target_points, self.target_vertex, self.extraction.params))
+            if g < 0:
+                vmap = np.full(n_in, -1, dtype=np.int64)
+            elif self.global_map is not None:
+                vmap = self.global_map
+            else:
+                vmap = extract.fitted_vertex_map(found[g], self.support, self.edges, self.source_points,
+                                                 self.target_points, self.target_vertex, self.extraction.params)
             atomic_write(out / "symmetry_map.npy", lambda f: np.save(f, vmap), binary=True)
         return out
 
@@ -625,10 +643,14 @@ def _solve(
     clock.lap("geodesics")
 
     spectra = _spectra(src, tgt, p, self_match)
-    unary, floor = _unary(src, tgt, ps, pt, p, spectra, t_spacing)
+    # one Dijkstra per source sample serves the calibration and the trivial match
+    trivial = self_match and p.remove_trivial and p.trivial_radius > 0
+    reach = max((OFFSET_TARGETS + 2) * t_spacing if _offset_calibrated(p) else 0.0,
+                p.trivial_radius if trivial else 0.0)
+    near = _near_targets(src, ps, pt, reach) if self_match and reach > 0 else None
+    unary, floor = _unary(src, tgt, ps, pt, p, spectra, t_spacing, near)
     clock.lap("descriptors")
-    if self_match and p.remove_trivial and p.trivial_radius > 0:
-        near = geodesics.distances_from(src.graph, ps, limit=p.trivial_radius)[:, pt]
+    if trivial:
         unary = model.suppress_trivial(unary, near, p.trivial_radius, floor)
     unary = unary.astype(np.float32)
     clock.lap("unary")
