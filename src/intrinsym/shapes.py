@@ -133,11 +133,12 @@ def cuboctahedron(subdivisions: int = 3) -> GeneratedShape:
     return GeneratedShape("cuboctahedron", v, f, _vertex_maps(v, group), labels)
 
 
-def _latlon_mesh(ring: np.ndarray, pole: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _latlon_mesh(ring: np.ndarray, pole: float, north: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Close a latitude-longitude grid of vertices (n_lat, n_lon, 3) into a triangle mesh.
 
-    Vertices: the grid (row-major), the poles (0, 0, -pole) and (0, 0, pole), then one
-    centre per quad (:func:`_split_quads`); the poles are fanned to the first and last row.
+    Vertices: the grid (row-major), the poles (0, 0, -pole) and (0, 0, north) (``north``
+    defaults to ``pole``), then one centre per quad (:func:`_split_quads`); the poles
+    are fanned to the first and last row.
 
     Returns
     -------
@@ -145,7 +146,7 @@ def _latlon_mesh(ring: np.ndarray, pole: float) -> tuple[np.ndarray, np.ndarray,
     centres are vertices ``n_lat * n_lon + 2 + q``.
     """
     n_lat, n_lon = ring.shape[:2]
-    v = np.vstack([ring.reshape(-1, 3), [[0.0, 0.0, -pole], [0.0, 0.0, pole]]])
+    v = np.vstack([ring.reshape(-1, 3), [[0.0, 0.0, -pole], [0.0, 0.0, pole if north is None else north]]])
     south, north = n_lat * n_lon, n_lat * n_lon + 1
     idx = np.arange(n_lat * n_lon).reshape(n_lat, n_lon)
     nxt = np.roll(idx, -1, axis=1)
@@ -303,10 +304,27 @@ def _bump(t: np.ndarray) -> np.ndarray:
     return np.clip(1.0 - t**2, 0.0, None) ** 3
 
 
-#: The body of :func:`partial`: (longitude, latitude, angular radius, height) of each
-#: bump (degrees, degrees, radians, radius units), placed without any symmetry.
-BODY_BUMPS = ((205.0, 35.0, 0.9, 0.55), (265.0, -40.0, 0.7, -0.25), (290.0, 30.0, 0.5, 0.3),
-              (175.0, -60.0, 0.8, 0.35), (330.0, 75.0, 0.5, -0.2))
+#: The body of :func:`partial`: (longitude, latitude, frequency, phase, amplitude) of
+#: each plane wave a cos(f d.u + phase) over unit directions d, u (degrees, degrees,
+#: radians^-1, radians, radius units), placed without any symmetry. Their sum bends the
+#: whole body: no patch of it is a piece of a sphere (whose rotations are isometries).
+BODY_WAVES = ((20.0, 50.0, 3.0, 0.4, 0.10), (140.0, -20.0, 4.0, 1.3, 0.08), (250.0, 10.0, 2.5, 2.1, 0.12),
+              (310.0, -60.0, 3.5, 0.7, 0.08), (80.0, 80.0, 5.0, 2.9, 0.06), (200.0, -35.0, 4.5, 1.9, 0.07))
+
+#: Limb collar of :func:`partial`, in units of the limb's elliptical radius: the body
+#: is exactly a unit sphere out to COLLAR[0] (which holds the limb and its thumb) and
+#: fully bent from COLLAR[1] on.
+COLLAR = (1.3, 1.8)
+
+
+def _body(direction: np.ndarray) -> np.ndarray:
+    """(..., 3) unit directions -> (...) radius offset of the body of :func:`partial`."""
+    out = np.zeros(direction.shape[:-1])
+    for lon, lat, frequency, phase, amplitude in BODY_WAVES:
+        lon, lat = np.radians(lon), np.radians(lat)
+        axis = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+        out += amplitude * np.cos(frequency * (direction @ axis) + phase)
+    return out
 
 
 def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> GeneratedShape:
@@ -314,13 +332,14 @@ def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> Ge
 
     A star-shaped surface over a latitude-longitude grid (``8 * resolution`` longitudes,
     ``4 * resolution`` latitude bands, poles single vertices, each quad split about its
-    centre): radius 1 plus the bumps of :data:`BODY_BUMPS` (an irregular body, symmetric
-    under no isometry) plus two limbs on the equator at longitudes 0 and 90 degrees.
-    A limb is a radial paddle of ``length``, angular half-width ``width`` (radians) in
-    longitude and 1.6 ``width`` in latitude, with a "thumb" of 0.6 ``length`` on one
-    side, so that it has no (near-)symmetry of its own; the body
-    bumps vanish on the limbs. The rotation by 90 degrees about z maps limb 1 onto
-    limb 2 exactly (and grid vertices to grid vertices).
+    centre): radius 1 plus the waves of :data:`BODY_WAVES` (an irregular body, symmetric
+    under no isometry, and without spherical patches) plus two limbs on the equator at
+    longitudes 0 and 90 degrees. A limb is a radial paddle of ``length``, angular
+    half-width ``width`` (radians) in longitude and 1.6 ``width`` in latitude, with a
+    "thumb" of 0.6 ``length`` on one side, so that it has no (near-)symmetry of its own.
+    The body's waves fade out over a collar around each limb (:data:`COLLAR`). The
+    rotation by 90 degrees about z maps limb 1 and its collar onto limb 2 and its
+    collar exactly (and grid vertices to grid vertices).
 
     Returns
     -------
@@ -336,23 +355,24 @@ def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> Ge
     lon_i, lat_i = np.meshgrid(np.arange(n_lon), np.arange(1, n_lat), indexing="xy")
     lon, lat = 2 * np.pi * lon_i / n_lon, np.pi * (lat_i / n_lat - 0.5)
     direction = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], axis=-1)
+    body = _body(direction)
     radius = np.ones(lon.shape)
-    for c_lon, c_lat, size, height in BODY_BUMPS:
-        c_lon, c_lat = np.radians(c_lon), np.radians(c_lat)
-        centre = np.array([np.cos(c_lat) * np.cos(c_lon), np.cos(c_lat) * np.sin(c_lon), np.sin(c_lat)])
-        radius += height * _bump(np.arccos(np.clip(direction @ centre, -1.0, 1.0)) / size)
     limb = np.zeros(lon.shape, dtype=np.int64)
     for k, start in enumerate((0, shift)):
         # longitude offset from the limb axis computed from integers: identical on both limbs
         offset = 2 * np.pi * ((lon_i - start + n_lon // 2) % n_lon - n_lon // 2) / n_lon
-        profile = length * _bump(np.hypot(offset, lat / 1.6) / width) + 0.6 * length * _bump(
+        spread = np.hypot(offset, lat / 1.6) / width
+        profile = length * _bump(spread) + 0.6 * length * _bump(
             np.hypot(offset - 0.5 * width, lat - 0.9 * width) / (0.5 * width))
         radius += profile
+        body *= 1.0 - _bump(np.maximum(spread - COLLAR[0], 0.0) / (COLLAR[1] - COLLAR[0]))
         limb[profile > 0] = k + 1
+    radius += body
     one = limb == 1
     if np.any(np.roll(limb, -shift, axis=1)[one] != 2) or np.any(np.roll(radius, -shift, axis=1)[one] != radius[one]):
-        raise AssertionError("a body bump reaches a limb, or the limbs overlap")
-    v, f, quads = _latlon_mesh(radius[..., None] * direction, 1.0)
+        raise AssertionError("the body reaches a limb, or the limbs overlap")
+    poles = 1.0 + _body(np.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0]]))
+    v, f, quads = _latlon_mesh(radius[..., None] * direction, poles[0], poles[1])
     idx = np.arange(limb.size).reshape(limb.shape)
     south, north = limb.size, limb.size + 1
     # labels: grid vertices by their profile, quad centres where all four corners agree
