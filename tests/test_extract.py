@@ -176,6 +176,30 @@ def test_unary_peaks_seed_the_symmetries_bp_lost():
     assert tuple(ROTATION.tolist()) in images and tuple(MIRROR.tolist()) in images
 
 
+def test_later_passes_add_their_modes_scored_on_their_own_marginals():
+    """Pass 1 kept the mirror, pass 2 (mirror removed) the rotation: both are extracted,
+    each scored on its own pass; the unary of pass 2 seeds what neither pass kept."""
+    p = ExtractParams(d_error=0.01)
+    first, second = marginals(), marginals(mirror=ROTATION)
+    alone = extract(first, GRAPH, TARGETS, p, self_target=SELF)
+    both = extract(first, GRAPH, TARGETS, p, self_target=SELF, passes=[(second, second)])
+    assert [s.target.tolist() for s in alone.symmetries] == [MIRROR.tolist()]
+    assert sorted(s.target.tolist() for s in both.symmetries) == sorted([MIRROR.tolist(), ROTATION.tolist()])
+    scores = {tuple(s.target.tolist()): s.score for s in both.symmetries}
+    assert scores[tuple(ROTATION.tolist())] == pytest.approx(scores[tuple(MIRROR.tolist())])
+    # a third map only in the second pass's unary, seeded with unary_seeds
+    turn = (IDENTITY + 16) % T
+    seeded = extract(first, GRAPH, TARGETS, p, self_target=SELF, unary=first,
+                     passes=[(second, marginals(mirror=turn))])
+    assert tuple(turn.tolist()) in {tuple(s.target.tolist()) for s in seeded.symmetries}
+    images = {tuple(s.target.tolist()) for s in query(first, GRAPH, TARGETS, 2, p, SELF, passes=[(second, second)])}
+    assert {tuple(MIRROR.tolist()), tuple(ROTATION.tolist())} <= images
+    # at most max_count symmetries per pass
+    capped = extract(first, GRAPH, TARGETS, dataclasses.replace(p, max_count=1), self_target=SELF,
+                     passes=[(second, second)])
+    assert len(capped.symmetries) == 2
+
+
 def test_merge_joins_agreeing_maps_only():
     p = ExtractParams(d_error=0.01)
     left = np.where(np.arange(S) <= 5, MIRROR, -1)

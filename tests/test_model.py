@@ -11,9 +11,11 @@ from intrinsym.model import (
     nmi_potential,
     pairwise_dense,
     potential_floor,
+    suppress_peaks,
     suppress_trivial,
     truncation_width,
 )
+from intrinsym.geodesics import SparseDistances
 
 
 def test_nmi_potential_paper_values():
@@ -43,6 +45,27 @@ def test_suppress_trivial():
     out = suppress_trivial(unary, dist, 0.05, 0.01)
     assert out.tolist() == [[0.01, 0.01, 0.5], [0.5, 0.5, 0.01]]
     assert unary[0, 0] == 0.5  # input untouched
+
+
+def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
+    # targets on a line at 0, 0.03, 0.06, 0.1, 0.3; distances kept up to 0.12
+    x = np.array([0.0, 0.03, 0.06, 0.1, 0.3])
+    d = np.abs(x[:, None] - x[None, :])
+    ptr, idx, dist = [0], [], []
+    for row in d:
+        keep = np.flatnonzero(row <= 0.12)
+        keep = keep[np.argsort(row[keep], kind="stable")]
+        idx.extend(keep)
+        dist.extend(row[keep])
+        ptr.append(len(idx))
+    targets = SparseDistances(np.array(ptr), np.array(idx), np.array(dist), 0.12)
+    unary = np.full((2, 5), 0.5)
+    marg = np.array([[0.1, 0.5, 0.2, 0.1, 0.1], [0.0, 0.1, 0.1, 0.2, 0.6]])
+    out = suppress_peaks(unary, marg, targets, 0.05, 0.01)
+    assert out.tolist() == [[0.01, 0.01, 0.01, 0.5, 0.5], [0.5, 0.5, 0.5, 0.5, 0.01]]
+    assert np.all(unary == 0.5)  # input untouched
+    with pytest.raises(ValueError, match="suppression needs"):
+        suppress_peaks(unary, marg, targets, 0.2, 0.01)
 
 
 def test_descriptor_scale_is_median_of_k_nearest():

@@ -39,6 +39,10 @@ MODEL_OPTIONS = [
     ("--damping", "damping", float, f"message damping in [0, 1) (default {D.damping})"),
     ("--backend", "backend", str, f"where BP runs: auto (GPU if CuPy sees one and --schedule flooding), cpu or gpu (default {D.backend})"),
     ("--trivial-radius", "trivial_radius", float, f"radius of the removed trivial match, units of sqrt(area) (default {D.trivial_radius})"),
+    ("--passes", "passes", int, "BP passes; each further pass removes the earlier passes' argmax from the unary "
+                                "and finds another mode (default: 1 for detect, 2 for match)"),
+    ("--pass-radius", "pass_radius", float, f"radius about each argmax that a further pass removes, units of "
+                                            f"sqrt(area) (default {D.pass_radius})"),
     ("--seed", "seed", int, f"random seed of sampling and BP orders (default {D.seed})"),
     ("--dtype", "dtype", str, f"message storage float32 or float64 (default {D.dtype})"),
     ("--unary", "unary", str, f"unary descriptor terms {'/'.join(pipeline.UNARY_TERMS)} joined by '*' "
@@ -399,7 +403,8 @@ def _query(args: argparse.Namespace, result: pipeline.Result, out: Path) -> int:
     p = dataclasses.replace(result.params, **{k: v for k, v in (("peak_threshold", args.peak_threshold),
                                                                 ("d_error", args.d_error)) if v is not None})
     found = extract.from_result(result.marginals, result.edges, result.support, result.source_points,
-                                result.target_points, p.extraction(), source=sample, unary=result.unary)
+                                result.target_points, p.extraction(), source=sample, unary=result.unary,
+                                passes=result.passes)
     listed = extract.records(found, result.source_vertex, result.target_vertex, result.support)
     for record, sym in zip(listed, found):
         record["image_vertex"] = int(result.target_vertex[sym.target[np.searchsorted(sym.source, sample)]])

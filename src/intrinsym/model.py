@@ -143,6 +143,39 @@ def suppress_trivial(
     return out
 
 
+def suppress_peaks(
+    unary: np.ndarray, marginals: np.ndarray, targets: SparseDistances, radius: float, floor: float
+) -> np.ndarray:
+    """Remove the mode a BP pass settled on from the unary, for the next pass.
+
+    Loopy BP keeps about one mode of a multi-modal posterior (one symmetry of a star,
+    the left/right swap of two frames but not the identity). As the trivial match is
+    removed before the first pass, every target within ``radius`` of each row's argmax
+    gets the unary's floor, and BP run again settles on another mode.
+
+    Parameters
+    ----------
+    unary : (S, T) array
+    marginals : (S, T) array
+        The marginals of the pass.
+    targets : SparseDistances
+        Target-target geodesics; must reach ``radius``.
+    radius : float
+    floor : float
+
+    Returns
+    -------
+    (S, T) array, a modified copy.
+    """
+    if targets.radius < radius:
+        raise ValueError(f"target distances reach {targets.radius:.4g}, the suppression needs {radius:.4g}")
+    out = np.array(unary, copy=True)
+    for s, peak in enumerate(np.argmax(marginals, axis=1)):
+        row = slice(targets.indptr[peak], targets.indptr[peak + 1])
+        out[s, targets.indices[row][targets.dist[row] <= radius]] = floor
+    return out
+
+
 def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None = None) -> float:
     """Typical descriptor distance of a true match at the sampling offset.
 

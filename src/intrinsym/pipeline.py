@@ -36,7 +36,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # paper's behaviour (BP converging in a handful of iterations, sharpening the unary
     # rather than smearing it); 1.5 spacings measured a far weaker model on TOSCA cat0.
     "paper": dict(rho=0.4, gamma=0.01, schedule="serial", iterations=100, remove_trivial=False, tolerance=0.5,
-                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0, zoomout=False),
+                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0, zoomout=False, passes=1),
 }
 
 #: Smallest fraction of the global symmetry's sample pairs that the seeded ZoomOut map
@@ -104,6 +104,16 @@ class Params:
         Put the unary at its floor for targets within ``trivial_radius`` of the source
         sample (self-matching only).
     trivial_radius : float
+    passes : int or None
+        BP passes; None: 1 when self-matching (the trivial-match removal already takes
+        out the identity's mode), 2 when matching two shapes (identity and swap). Loopy BP settles on about one mode of a multi-modal posterior (one of
+        a star's symmetries; the left/right swap of two frames, not their identity);
+        each further pass reruns BP with the earlier passes' argmax removed from the
+        unary (:func:`intrinsym.model.suppress_peaks`) and its mode joins the extraction
+        (beyond the paper). ``marginals`` stay the first pass's, the others are
+        ``Result.pass_marginals`` and ``Result.pass_unary``.
+    pass_radius : float
+        Radius about each row's argmax that a further pass removes.
     seed : int
     dtype : {"float32", "float64"}
         Storage of messages and marginals.
@@ -171,6 +181,8 @@ class Params:
     backend: str = "auto"
     remove_trivial: bool = True
     trivial_radius: float = 0.08
+    passes: int | None = None
+    pass_radius: float = 0.08
     seed: int = 0
     dtype: str = "float32"
     unary: str = "wks*spin"
@@ -206,6 +218,8 @@ class Params:
             (not 0 <= self.damping < 1, "damping must lie in [0, 1)"),
             (self.backend not in bp.BACKENDS, f"backend must be one of {bp.BACKENDS}"),
             (self.trivial_radius < 0, "trivial_radius must be non-negative"),
+            (self.passes is not None and self.passes < 1, "passes must be at least 1"),
+            (self.pass_radius <= 0, "pass_radius must be positive"),
             (self.dtype not in ("float32", "float64"), "dtype must be float32 or float64"),
             (any(t not in UNARY_TERMS for t in self.unary_terms) or len(set(self.unary_terms)) < len(self.unary_terms),
              f"unary must be distinct terms of {UNARY_TERMS} joined by '*'"),
@@ -516,6 +530,9 @@ class Result:
         Image of every input vertex under the global symmetry when detection refined it
         (``Params.zoomout``); None: ``symmetry_map.npy`` is the extraction's
         (:func:`intrinsym.extract.fitted_vertex_map`). Stored in ``result.npz``.
+    pass_marginals, pass_unary : (P - 1, S, T) float32 or None
+        Marginals (rows summing to 1) and unary of the BP passes after the first
+        (``Params.passes``); None for one pass. Stored in ``result.npz``.
     """
 
     source_points: np.ndarray
@@ -530,8 +547,18 @@ class Result:
     support: extract.Support | None = None
     extraction: extract.Extraction | None = None
     global_map: np.ndarray | None = None
+    pass_marginals: np.ndarray | None = None
+    pass_unary: np.ndarray | None = None
 
     ARRAYS = ("source_points", "target_points", "source_vertex", "target_vertex", "edges", "unary", "marginals")
+    PASS_ARRAYS = ("pass_marginals", "pass_unary")
+
+    @property
+    def passes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(marginals, unary) of every BP pass after the first, as the extraction takes them."""
+        if self.pass_marginals is None or self.pass_unary is None:
+            return []
+        return list(zip(self.pass_marginals, self.pass_unary))
 
     def save(self, out_dir: str | os.PathLike) -> Path:
         """Write ``out_dir/result.npz`` and ``out_dir/run.json`` (atomically), and with an
@@ -543,6 +570,9 @@ class Result:
             arrays.update(self.support.to_arrays())
         if self.global_map is not None:
             arrays["global_map"] = np.asarray(self.global_map, dtype=np.int64)
+        for name in self.PASS_ARRAYS:
+            if getattr(self, name) is not None:
+                arrays[name] = np.asarray(getattr(self, name), dtype=np.float32)
         run = {"params": dataclasses.asdict(self.params), **self.info}
         atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
         atomic_write(out / "run.json", lambda f: json.dump(run, f, indent=2))
@@ -571,10 +601,10 @@ class Result:
             has_support = all(key in z.files for key in extract.Support.KEYS)
             keys = extract.Support.KEYS + tuple(k for k in extract.Support.OPTIONAL_KEYS if k in z.files)
             support = extract.Support.from_arrays({k: z[k] for k in keys}) if has_support else None
-            global_map = z["global_map"] if "global_map" in z.files else None
+            optional = {key: z[key] for key in ("global_map", *cls.PASS_ARRAYS) if key in z.files}
         run = json.loads((out / "run.json").read_text())
         params = Params(**run.pop("params"))
-        return cls(**arrays, params=params, info=run, support=support, global_map=global_map)
+        return cls(**arrays, params=params, info=run, support=support, **optional)
 
 
 def _versions() -> dict[str, str]:
@@ -610,9 +640,9 @@ class _Clock:
             self.log(f"{stage}: {self.seconds[stage]:.2f} s")
 
 
-def _model_bytes(n_s: int, n_t: int, n_edges: int, itemsize: int) -> int:
+def _model_bytes(n_s: int, n_t: int, n_edges: int, itemsize: int, passes: int = 1) -> int:
     """Rough peak of the arrays sized by |Ps| x |Pt| and |E| x |Pt|."""
-    return 6 * n_s * n_t * 4 + 2 * n_edges * n_t * itemsize
+    return (6 + 2 * (passes - 1)) * n_s * n_t * 4 + 2 * n_edges * n_t * itemsize
 
 
 def _solve(
@@ -633,13 +663,15 @@ def _solve(
         raise ParameterError(f"{path or 'shape'}: the source samples form no neighbourhood graph")
     edge_length = geodesics.pair_distances(src.graph, ps[edges])
     dtype = np.dtype(p.dtype)
-    mesh.check_memory(_model_bytes(len(ps), len(pt), len(edges), dtype.itemsize), "the model", path)
+    n_passes = p.passes if p.passes is not None else 1 if self_match else 2
+    mesh.check_memory(_model_bytes(len(ps), len(pt), len(edges), dtype.itemsize, n_passes), "the model", path)
     if p.lam is not None:
         lam = p.lam * src.scale**2
     else:
         lam = model.lambda_for_tolerance(p.tolerance * t_spacing, p.rho)
     delta = model.truncation_width(lam, p.rho)
-    targets = geodesics.local_distances(tgt.graph, pt, float(edge_length.max() + delta))
+    ring = float(edge_length.max() + delta)  # the exact message needs this much
+    targets = geodesics.local_distances(tgt.graph, pt, max(ring, p.pass_radius) if n_passes > 1 else ring)
     clock.lap("geodesics")
 
     spectra = _spectra(src, tgt, p, self_match)
@@ -661,9 +693,18 @@ def _solve(
         if log is not None:
             log(f"bp iteration {it}: max message change {change:.3g}")
 
-    res = bp.belief_propagation(
+    runs = [bp.belief_propagation(
         mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
-    )
+    )]
+    passes = []
+    for _ in range(1, n_passes):
+        mrf = dataclasses.replace(mrf, unary=model.suppress_peaks(mrf.unary, runs[-1].marginals, targets,
+                                                                  p.pass_radius, floor))
+        runs.append(bp.belief_propagation(
+            mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
+        ))
+        passes.append((runs[-1].marginals.astype(np.float32), mrf.unary))
+    res = runs[0]
     clock.lap("bp")
     support = extract.Support(
         edge_length=edge_length,
@@ -675,7 +716,8 @@ def _solve(
         target_vertices=tgt.input_vertices,
     )
     extraction = extract.from_result(
-        res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary
+        res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary,
+        passes=passes,
     )
     clock.lap("extract")
     source_vertex = src.nearest_input_vertex(src.shape.vertices[ps])
@@ -714,6 +756,8 @@ def _solve(
             "seconds_per_iteration": float(np.mean(res.seconds)),
             "setup_seconds": res.setup_seconds,
             "message_updates": int(sum(res.updates)),
+            "passes": [{"iterations": run.iterations, "converged": run.converged, "max_change": run.max_change}
+                       for run in runs[1:]],
         },
         **zoomout,
         "versions": _versions(),
@@ -731,6 +775,8 @@ def _solve(
         support=support,
         extraction=extraction,
         global_map=global_map,
+        pass_marginals=np.stack([m for m, _ in passes]) if passes else None,
+        pass_unary=np.stack([u for _, u in passes]) if passes else None,
     )
 
 
