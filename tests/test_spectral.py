@@ -157,3 +157,27 @@ def test_seeded_symmetry_keeps_the_seeded_one_of_several_symmetries():
         truth = cKDTree(v).query(v * (1 - 2 * np.array(flip)))[1]
         image = spectral.seeded_symmetry(v, evecs, source, truth[source], k_seed=6, n_final=30)
         assert evaluate.score_map(image, mesh.from_arrays(v, sphere.faces), truth).within(0.05) > 0.99
+
+
+def test_seeded_map_between_two_shapes_recovers_a_vertex_permutation(mirror):
+    """Two-shape form: the second shape is the first, rotated, scaled by 2 and with its
+    vertices shuffled; sparse pairs of its mirror seed the map, which must come out as
+    the mirror composed with the shuffle."""
+    from intrinsym import descriptors
+
+    v, f, sym = mirror
+    rng = np.random.default_rng(3)
+    order = rng.permutation(len(v))  # vertex i of the copy is vertex order[i] of v
+    rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    w, g = 2.0 * v[order] @ rot.T, np.argsort(order)[f]
+    _, ev = descriptors.eigenpairs(v, f, 31)
+    _, ew = descriptors.eigenpairs(w, g, 31)
+    truth = np.argsort(order)[sym]  # vertex of the copy that is the mirror image of vertex i of v
+    source = np.arange(0, len(v), 40)
+    image = spectral.seeded_symmetry(v, ev, source, truth[source], k_seed=6, n_final=30,
+                                     target_vertices=w, target_evecs=ew)
+    assert image.shape == (len(v),) and image.max() < len(w)
+    assert np.median(np.linalg.norm(w[image] - w[truth], axis=1)) < 0.02 * 2.0 * np.ptp(v, axis=0).max()
+    assert np.mean(image == truth) > 0.8
+    with pytest.raises(ValueError, match="neither"):
+        spectral.seeded_symmetry(v, ev, source, truth[source], k_seed=6, target_vertices=w)

@@ -324,6 +324,8 @@ def seeded_symmetry(
     n_targets: int = 3000,
     points: np.ndarray | None = None,
     candidates: np.ndarray | None = None,
+    target_vertices: np.ndarray | None = None,
+    target_evecs: np.ndarray | None = None,
 ) -> np.ndarray:
     """A self-map from sparse correspondences, refined by ZoomOut to vertex precision.
 
@@ -354,6 +356,9 @@ def seeded_symmetry(
         Vertices to map (default: all) and the vertices their images are chosen from
         (default: all). The last map costs len(points) x len(candidates) products: on
         a subdivided working mesh, the input's own vertices are enough.
+    target_vertices, target_evecs : (M, 3), (M, K) float arrays, optional
+        A second shape: the map then goes from the first shape into this one (two-shape
+        matching; ``target`` and ``candidates`` index its vertices).
 
     Returns
     -------
@@ -368,12 +373,21 @@ def seeded_symmetry(
     if not 1 <= k_seed <= n_final or len(source) < k_seed or len(source) != len(target):
         raise ValueError(f"need 1 <= k_seed ({k_seed}) <= n_final ({n_final}) and at least k_seed pairs, "
                          f"got {len(source)} sources and {len(target)} targets")
+    if (target_vertices is None) != (target_evecs is None):
+        raise ValueError("give both target_vertices and target_evecs, or neither")
+    if target_evecs is not None:
+        n_final = min(n_final, target_evecs.shape[1] - 1)
     spread, n_samples = _spread(np.asarray(vertices, dtype=np.float64), n_samples, n_targets, n_final)
     phi = np.asarray(evecs, dtype=np.float64)[:, 1 : n_final + 1]
-    C = np.linalg.lstsq(phi[source, :k_seed], phi[target, :k_seed], rcond=None)[0]
-    targets = phi[spread]
-    samples = targets[:n_samples]
+    if target_evecs is None:
+        psi, target_spread = phi, spread
+    else:
+        psi = np.asarray(target_evecs, dtype=np.float64)[:, 1 : n_final + 1]
+        target_spread = _spread(np.asarray(target_vertices, dtype=np.float64), n_samples, n_targets, n_final)[0]
+    C = np.linalg.lstsq(phi[source, :k_seed], psi[target, :k_seed], rcond=None)[0]
+    samples = phi[spread[:n_samples]]
+    targets = psi[target_spread]
     _, C = zoomout(samples, targets, nearest_images(samples, targets, C), k_seed)
     points = np.arange(len(phi)) if points is None else np.asarray(points, dtype=np.int64)
-    candidates = np.arange(len(phi)) if candidates is None else np.asarray(candidates, dtype=np.int64)
-    return candidates[nearest_images(phi[points], phi[candidates], C)]
+    candidates = np.arange(len(psi)) if candidates is None else np.asarray(candidates, dtype=np.int64)
+    return candidates[nearest_images(phi[points], psi[candidates], C)]
