@@ -145,3 +145,17 @@ def test_partial_ground_truth_scores_only_vertices_with_an_image(mirror):
     marg[np.arange(5), best] = 1.0
     scores = score_marginals(marg, np.concatenate([src, off]), tgt, shape, partial)
     assert scores.n_scored == 5 and scores.mirror_hit == 1.0
+
+
+def test_extrinsic_mirror_finds_the_reflection_of_a_moved_shuffled_shape(mirror):
+    from intrinsym.evaluate import extrinsic_mirror
+
+    v, f, sym = mirror
+    rng = np.random.default_rng(5)
+    order = rng.permutation(len(v))
+    rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    moved = 1000.0 * v[order] @ rot.T + [3.0, -7.0, 2.0]  # millimetres, anywhere
+    found, residual = extrinsic_mirror(moved)
+    inverse = np.argsort(order)
+    assert np.array_equal(found, inverse[sym[order]])
+    assert residual.max() < 1e-6 * 1000.0

@@ -83,6 +83,45 @@ def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None, al
     return sym
 
 
+def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """Ground truth for a mesh posed (nearly) mirror-symmetrically: its best reflection.
+
+    Each principal plane through the centroid reflects the vertices; ICP
+    (:func:`trimesh.registration.icp`, rigid) then moves the reflected copy onto the
+    original, and the plane whose copy lands closest (median distance) wins. Every
+    vertex's image is the vertex nearest its reflection. Only as good as the pose is
+    symmetric: check ``residual``.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+    iterations : int
+        ICP iterations per plane.
+
+    Returns
+    -------
+    sym : (N,) int64
+        Vertex nearest the reflection of every vertex.
+    residual : (N,) float64
+        Distance from each reflected vertex to that vertex (input units).
+    """
+    import trimesh.registration
+    from scipy.spatial import cKDTree
+
+    x = np.asarray(vertices, dtype=np.float64)
+    x = x - x.mean(axis=0)
+    tree = cKDTree(x)
+    best = None
+    for normal in np.linalg.svd(x, full_matrices=False)[2]:
+        reflected = x - 2.0 * np.outer(x @ normal, normal)
+        _, moved, _ = trimesh.registration.icp(reflected, x, max_iterations=iterations, reflection=False,
+                                               scale=False)
+        residual, sym = tree.query(moved)
+        if best is None or np.median(residual) < np.median(best[1]):
+            best = (sym.astype(np.int64), residual)
+    return best
+
+
 def marginal_scores(
     marginals: np.ndarray,
     d_source: np.ndarray,

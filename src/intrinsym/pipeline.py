@@ -577,20 +577,29 @@ class Result:
         atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
         atomic_write(out / "run.json", lambda f: json.dump(run, f, indent=2))
         if self.support is not None and self.extraction is not None:
-            found = self.extraction.symmetries
-            listed = extract.records(found, self.source_vertex, self.target_vertex, self.support)
+            listed = extract.records(self.extraction.symmetries, self.source_vertex, self.target_vertex, self.support)
             atomic_write(out / "symmetries.json", lambda f: json.dump(listed, f))
-            n_in = len(self.support.vertex_source)
-            g = self.extraction.global_index
-            if g < 0:
-                vmap = np.full(n_in, -1, dtype=np.int64)
-            elif self.global_map is not None:
-                vmap = self.global_map
-            else:
-                vmap = extract.fitted_vertex_map(found[g], self.support, self.edges, self.source_points,
-                                                 self.target_points, self.target_vertex, self.extraction.params)
+            vmap = self.symmetry_map()
             atomic_write(out / "symmetry_map.npy", lambda f: np.save(f, vmap), binary=True)
         return out
+
+    def symmetry_map(self) -> np.ndarray:
+        """(N_in,) int64: the image of every input vertex under the global symmetry
+        (``symmetry_map.npy``), -1 everywhere when there is none.
+
+        The seeded ZoomOut map when detection made one (``global_map``), else the
+        extraction's (:func:`intrinsym.extract.fitted_vertex_map`). Needs ``support``
+        and ``extraction``.
+        """
+        if self.support is None or self.extraction is None:
+            raise ValueError("the result has no extraction")
+        g = self.extraction.global_index
+        if g < 0:
+            return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
+        if self.global_map is not None:
+            return np.asarray(self.global_map, dtype=np.int64)
+        return extract.fitted_vertex_map(self.extraction.symmetries[g], self.support, self.edges, self.source_points,
+                                         self.target_points, self.target_vertex, self.extraction.params)
 
     @classmethod
     def load(cls, out_dir: str | os.PathLike) -> Result:

@@ -8,7 +8,12 @@ layout: ``<dir>/<class><pose>.off`` with ``<dir>/<class>.sym``)::
 
 A configuration is a preset name ("paper", "default") or a unary name (``Params.unary``,
 e.g. "wks*spin", on the default preset). "unary" scores the row-normalised unary,
-i.e. the marginals of the same model without edges; "bp" scores the BP marginals.
+i.e. the marginals of the same model without edges; "bp" scores the BP marginals; "map"
+the global map (``symmetry_map.npy``) within 0.05 and 0.10 of the true image.
+
+``--mirror MESH`` (repeatable) adds shapes without a symmetry file, posed
+mirror-symmetrically: their ground truth is their best reflection
+(:func:`intrinsym.evaluate.extrinsic_mirror`), and the row notes its median residual.
 """
 
 from __future__ import annotations
@@ -19,6 +24,8 @@ import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+
+import numpy as np
 
 from . import evaluate, mesh, pipeline
 from .files import atomic_write
@@ -35,23 +42,34 @@ def config_params(config: str) -> tuple[str, dict]:
     return "default", {"unary": config}
 
 
-def score_shape(mesh_path: Path, sym_path: Path, config: str, seed: int = 0,
+def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int = 0,
                 log: Callable[[str], None] | None = None, **params) -> dict:
-    """Run ``detect`` on one shape and score its unary and its BP marginals.
+    """Run ``detect`` on one shape and score its unary, its BP marginals and its global map.
+
+    ``sym_path`` None: the ground truth is the shape's best reflection
+    (:func:`intrinsym.evaluate.extrinsic_mirror`).
 
     Returns
     -------
     dict with "shape", "config", "unary" and "bp" (each a dict of the four scores and
-    ``n_scored``), "iterations" (BP) and "seconds" (per stage).
+    ``n_scored``), "map" (within 0.05 and 0.10, mean error), "iterations" (BP),
+    "seconds" (per stage) and, for a reflection, "mirror_residual" (its median, units
+    of sqrt(area)).
     """
     preset, overrides = config_params(config)
     result = pipeline.detect(mesh_path, preset=preset, log=log, seed=seed, **{**overrides, **params})
     shape = mesh.load(mesh_path)
-    sym = evaluate.load_symmetry_map(sym_path, len(shape.vertices))
-    row = {"shape": mesh_path.stem, "config": config}
+    row: dict = {"shape": mesh_path.stem, "config": config}
+    if sym_path is None:
+        sym, residual = evaluate.extrinsic_mirror(shape.vertices)
+        row["mirror_residual"] = float(np.median(residual) / np.sqrt(mesh.surface_area(shape)))
+    else:
+        sym = evaluate.load_symmetry_map(sym_path, len(shape.vertices))
     for column, marginals in (("unary", result.unary), ("bp", result.marginals)):
         scores = evaluate.score_marginals(marginals, result.source_vertex, result.target_vertex, shape, sym, seed=seed)
         row[column] = scores.as_dict()
+    found = evaluate.score_map(result.symmetry_map(), shape, sym)
+    row["map"] = {"within_0.05": found.within(0.05), "within_0.10": found.within(0.10), "mean_error": found.mean_error}
     row["iterations"] = result.info["bp"]["iterations"]
     row["seconds"] = {k: round(v, 2) for k, v in result.info["seconds"].items()}
     return row
@@ -59,12 +77,15 @@ def score_shape(mesh_path: Path, sym_path: Path, config: str, seed: int = 0,
 
 def markdown(rows: list[dict]) -> str:
     """The rows as a Markdown table: shape x configuration x {unary, bp} scores."""
-    head = ["shape", "config"] + [f"{c} {s}" for s in SCORES for c in ("unary", "bp")] + ["BP iterations"]
+    head = (["shape", "config"] + [f"{c} {s}" for s in SCORES for c in ("unary", "bp")]
+            + ["BP iterations", "map within 0.05", "map within 0.10", "map mean error"])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        cells = [r["shape"], f"`{r['config']}`"]
+        shape = r["shape"] if "mirror_residual" not in r else f"{r['shape']} (reflection, residual {r['mirror_residual']:.4f})"
+        cells = [shape, f"`{r['config']}`"]
         cells += [f"{r[c][s]:.3f}" for s in SCORES for c in ("unary", "bp")]
         cells.append(str(r["iterations"]))
+        cells += [f"{r['map'][k]:.3f}" for k in ("within_0.05", "within_0.10", "mean_error")]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -76,8 +97,10 @@ def _sym_path(data: Path, shape: str) -> Path:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m intrinsym.scores``; returns the exit code."""
     parser = argparse.ArgumentParser(prog="python -m intrinsym.scores", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", required=True, help="folder with <class><pose>.off meshes and <class>.sym maps")
-    parser.add_argument("--shapes", default=",".join(SHAPES), help=f"comma-separated shapes (default {','.join(SHAPES)})")
+    parser.add_argument("--data", default=".", help="folder with <class><pose>.off meshes and <class>.sym maps")
+    parser.add_argument("--shapes", help=f"comma-separated shapes (default {','.join(SHAPES)}, none with --mirror)")
+    parser.add_argument("--mirror", action="append", default=[],
+                        help="a mesh without a symmetry file, scored against its best reflection; repeat")
     parser.add_argument("--config", action="append", help="preset or unary name; repeat (default: paper and default)")
     parser.add_argument("--source", type=int, help="|Ps| (default: the configuration's)")
     parser.add_argument("--target", type=int, help="|Pt| (default: the configuration's)")
@@ -89,10 +112,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                                 ("iterations", args.iterations)) if v is not None}
     data = Path(args.data)
     rows = []
+    shapes = args.shapes if args.shapes is not None else "" if args.mirror else ",".join(SHAPES)
+    cases = [(data / f"{shape}.off", _sym_path(data, shape)) for shape in shapes.split(",") if shape]
+    cases += [(Path(path), None) for path in args.mirror]
     try:
-        for shape in args.shapes.split(","):
+        for mesh_path, sym_path in cases:
             for config in args.config or ["paper", "default"]:
-                row = score_shape(data / f"{shape}.off", _sym_path(data, shape), config, args.seed, **params)
+                row = score_shape(mesh_path, sym_path, config, args.seed, **params)
                 print(json.dumps(row), file=sys.stderr)
                 rows.append(row)
     except (mesh.InputError, pipeline.ParameterError) as err:
