@@ -11,6 +11,7 @@ from intrinsym.model import (
     nmi_potential,
     pairwise_dense,
     potential_floor,
+    row_scales,
     suppress_peaks,
     suppress_trivial,
     truncation_width,
@@ -66,6 +67,12 @@ def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
     assert np.all(unary == 0.5)  # input untouched
     with pytest.raises(ValueError, match="suppression needs"):
         suppress_peaks(unary, marg, targets, 0.2, 0.01)
+
+
+def test_row_scales_are_each_rows_median_over_its_near_targets():
+    d = np.array([[5.0, 1.0, 2.0, 9.0], [0.5, 7.0, 3.0, 4.0], [1.0, 1.0, 1.0, 1.0]])
+    near = np.array([[1, 3, 2], [0, -1, 2], [-1, -1, -1]])
+    assert row_scales(d, near).tolist() == [2.0, 1.75, 0.0]
 
 
 def test_descriptor_scale_is_median_of_k_nearest():

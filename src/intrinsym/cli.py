@@ -53,7 +53,8 @@ MODEL_OPTIONS = [
     ("--energies", "energies", int, f"WKS energies / HKS times (default {D.energies})"),
     ("--calibration", "calibration", str, f"how each calibrated width is measured: offset (descriptor distance to "
                                           f"the targets nearest a point on the surface), descriptor (to the "
-                                          f"--calibration-k nearest targets in descriptor space) or both (the larger) "
+                                          f"--calibration-k nearest targets in descriptor space), both (the larger) or local "
+                                          f"(both, raised per source sample to its own offset spread) "
                                           f"(default {D.calibration})"),
     ("--calibration-k", "calibration_k", int, f"nearest targets in descriptor space of the descriptor rule "
                                               f"(default {D.calibration_k})"),

@@ -213,7 +213,25 @@ def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None =
     return max(float(np.median(values)), np.finfo(np.float64).tiny)
 
 
-def calibrated_potential(distances: list[np.ndarray], scales: list[float], floor: float = 1e-3) -> np.ndarray:
+def row_scales(distance: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Each row's own spread on true matches: the median of ``distance[s, near[s]]``.
+
+    Parameters
+    ----------
+    distance : (S, T) array
+    near : (S, m) int array
+        Targets nearest each row's point on the surface; -1 entries are ignored.
+
+    Returns
+    -------
+    (S,) float64, 0 for a row without a calibration target.
+    """
+    near = np.asarray(near)
+    d = np.take_along_axis(np.asarray(distance, dtype=np.float64), np.maximum(near, 0), axis=1)
+    return np.array([np.median(row[keep]) if keep.any() else 0.0 for row, keep in zip(d, near >= 0)])
+
+
+def calibrated_potential(distances: list[np.ndarray], scales: list, floor: float = 1e-3) -> np.ndarray:
     """Unary from descriptor distances, calibrated per descriptor; products combine them.
 
     ``Phi = max(prod_i exp(-d_i^2 / (2 sigma_i^2)), floor)`` with ``sigma_i`` the
@@ -226,8 +244,8 @@ def calibrated_potential(distances: list[np.ndarray], scales: list[float], floor
     ----------
     distances : list of (S, T) arrays
         One descriptor-distance matrix per factor, >= 0.
-    scales : list of float
-        sigma_i of each factor, > 0, in the units of its distances.
+    scales : list of float or (S, 1) arrays
+        sigma_i of each factor, > 0, in the units of its distances (per row as a column).
     floor : float
         Smallest potential, in (0, 1).
 

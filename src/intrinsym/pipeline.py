@@ -48,7 +48,7 @@ UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
 #: Similarity-to-potential maps: Eq. 5 with gamma, or calibrated Gaussians.
 POTENTIALS = ("paper", "calibrated")
 #: How the calibrated potential measures each descriptor's spread (:func:`_unary`).
-CALIBRATIONS = ("both", "offset", "descriptor")
+CALIBRATIONS = ("both", "offset", "descriptor", "local")
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
@@ -130,7 +130,7 @@ class Params:
         Laplace-Beltrami eigenpairs of the WKS / HKS.
     energies : int
         Log-energies of the WKS, diffusion times of the HKS.
-    calibration : {"both", "offset", "descriptor"}
+    calibration : {"both", "offset", "descriptor", "local"}
         How sigma is measured. "offset": the median descriptor distance from points of
         the target shape to the ``OFFSET_TARGETS`` targets nearest them on the surface,
         i.e. of true matches at the sampling offset. "descriptor": the median distance
@@ -138,6 +138,9 @@ class Params:
         many exact symmetries these all sit at about zero distance and sigma collapses.
         "both": the larger of the two, which keeps the slack a descriptor needs where it
         is not invariant under the symmetry sought (a global WKS on a partial symmetry).
+        "local": "both", and when self-matching each source sample's width is raised to
+        its own offset spread (the median distance to its ``OFFSET_TARGETS`` nearest
+        targets), for points where the descriptor changes fastest (cone points).
     calibration_k : int
     unary_floor : float
         Smallest calibrated potential, in (0, 1).
@@ -189,7 +192,7 @@ class Params:
     potential: str = "calibrated"
     eigenpairs: int = 100
     energies: int = 100
-    calibration: str = "both"
+    calibration: str = "local"
     calibration_k: int = 7
     unary_floor: float = 1e-3
     peak_threshold: float = extract.ExtractParams.threshold
@@ -497,6 +500,8 @@ def _unary(
         scales = [model.descriptor_scale(d[-1], near=near) for d in per_term]
     if p.calibration != "offset":
         scales = [max(s, model.descriptor_scale(d, p.calibration_k)) for s, d in zip(scales, distances)]
+    if p.calibration == "local" and tgt is src:
+        scales = [np.maximum(s, model.row_scales(d, near))[:, None] for s, d in zip(scales, distances)]
     return model.calibrated_potential(distances, scales, p.unary_floor), p.unary_floor
 
 
