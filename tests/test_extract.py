@@ -135,6 +135,22 @@ def test_extract_partial_symmetry_is_not_global():
     assert extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01, min_fraction=0.4), self_target=SELF).symmetries == []
 
 
+def test_grow_rejects_an_image_that_most_mapped_neighbours_contradict():
+    """With chords (i ~ i+2, length 0.2) every sample has four neighbours. Sample 5's
+    only peak is target 12, the image of sample 3: it keeps the length to sample 4
+    (parent, 0.1) but not to 3, 6 or 7. A blend of two maps looks like this; the
+    growing leaves 5 unmapped rather than take it."""
+    edges = np.array([[i, (i + k) % S] for i in range(S) for k in (1, 2)])
+    edges.sort(axis=1)
+    graph = SourceGraph.from_edges(edges, np.tile([0.1, 0.2], S), S)
+    m = np.full((S, T), 0.01)
+    m[np.arange(S), IDENTITY] = 1.0
+    m[5, IDENTITY[5]], m[5, 12] = 0.01, 1.0
+    image = grow(m, graph, TARGETS, 0, 0, ExtractParams(d_error=0.01))
+    assert image[5] == -1
+    assert np.array_equal(np.delete(image, 5), np.delete(IDENTITY, 5))
+
+
 def test_complete_fills_a_gap_by_geometry_alone():
     # sample 4 has no mirror peak; its mapped neighbours 3 and 5 pin its image
     norm = normalise_rows(marginals(with_mirror=[0, 1, 2, 3, 5, 6, 7, 8, 9]))

@@ -312,9 +312,12 @@ def _grow(norm, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, threshold, d_error, m
     neighbour n of a mapped m may take any target t' >= threshold with
     |d_T(f(m), t') - d_S(m, n)| < d_error (a contiguous slice of the sorted row of f(m)).
     Among those it takes the one that agrees with most of its mapped neighbours, then
-    the largest marginal, if at least ``min_support`` of them agree. ``side`` 1 (0)
-    allows only targets within (outside) ``identity_radius`` of n itself, the target
-    ``self_target[n]``; -1 allows all. Returns the map's size.
+    the largest marginal, if at least ``min_support`` of them agree and no more than
+    half of them contradict it by more than 2 d_error (beyond the paper: where two
+    maps meet, e.g. rotations of a star at its centre, a candidate can keep the
+    parent's length and no other; the looser bar lets near-isometric bends through).
+    ``side`` 1 (0) allows only targets within (outside) ``identity_radius`` of n
+    itself, the target ``self_target[n]``; -1 allows all. Returns the map's size.
     """
     cand = np.empty(norm.shape[1], dtype=np.int64)
     queue = np.flatnonzero(image >= 0)
@@ -343,12 +346,14 @@ def _grow(norm, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, threshold, d_error, m
                 cand[n_cand] = t_idx[k]
                 n_cand += 1
             best, best_support, best_value = -1, -1, threshold
+            mapped = 0
+            for f in range(g_ptr[n], g_ptr[n + 1]):
+                mapped += image[g_nbr[f]] >= 0
             for c in range(n_cand):
                 value = norm[n, cand[c]]
-                # support >= 1 (the parent) always; it only ranks several candidates
-                support = 1 if n_cand == 1 and min_support == 1 else _fit(
-                    image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, d_error)[0]
-                if support < min_support:
+                support = _fit(image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, d_error)[0]
+                loose = _fit(image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, 2 * d_error, 2 * d_error)[0]
+                if support < min_support or 2 * loose < mapped:
                     continue
                 if support > best_support or (support == best_support and value >= best_value):
                     best, best_support, best_value = cand[c], support, value
