@@ -56,7 +56,7 @@ SEGMENTATION = 0.9
 #: (150, 1500) on the 2-core development machine while another job shared it.
 SIZES = {"full": (150, 1500), "quick": (60, 600)}
 #: BP passes of the shapes with many symmetries (``--passes`` overrides).
-PASSES = {"cuboctahedron": 5, "star": 5, "lantern": 3}
+PASSES = {"cuboctahedron": 12, "star": 5, "lantern": 3}
 #: Laplace-Beltrami eigenpairs of the seeded ZoomOut vertex maps.
 EIGENPAIRS = 60
 HORSE = Path(__file__).resolve().parents[2] / "shared" / "data" / "sumner_horse"
