@@ -106,10 +106,11 @@ class Params:
     trivial_radius : float
     passes : int or None
         BP passes; None: 1 when self-matching (the trivial-match removal already takes
-        out the identity's mode), 2 when matching two shapes (identity and swap). Loopy BP settles on about one mode of a multi-modal posterior (one of
-        a star's symmetries; the left/right swap of two frames, not their identity);
-        each further pass reruns BP with the earlier passes' argmax removed from the
-        unary (:func:`intrinsym.model.suppress_peaks`) and its mode joins the extraction
+        out the identity's mode), 2 when matching two shapes (identity and swap).
+        Loopy BP settles on about one mode of a multi-modal posterior (one of a star's
+        symmetries; the left/right swap of two frames, not their identity); each
+        further pass reruns BP with the earlier passes' argmax removed from the unary
+        (:func:`intrinsym.model.suppress_peaks`) and its mode joins the extraction
         (beyond the paper). ``marginals`` stay the first pass's, the others are
         ``Result.pass_marginals`` and ``Result.pass_unary``.
     pass_radius : float
@@ -140,7 +141,8 @@ class Params:
         is not invariant under the symmetry sought (a global WKS on a partial symmetry).
         "local": "both", and when self-matching each source sample's width is raised to
         its own offset spread (the median distance to its ``OFFSET_TARGETS`` nearest
-        targets), for points where the descriptor changes fastest (cone points).
+        targets), for points where the descriptor changes fastest (cone points); in
+        two-shape matching it is "both".
     calibration_k : int
     unary_floor : float
         Smallest calibrated potential, in (0, 1).
