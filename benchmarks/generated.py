@@ -134,13 +134,13 @@ def corner_recovery(result: intrinsym.Result, shape: shapes.GeneratedShape) -> t
     corners = np.flatnonzero(np.isclose(np.sort(np.abs(v), axis=1), [0.0, 1.0, 1.0]).all(axis=1))
     dist = geodesics.distances_from(geodesic_graph(v, shape.faces), corners)
     params = result.params.extraction()
+    passes = result.passes
     found_peaks, found_parts = [], []
     for i in range(len(corners)):
         s = int(np.argmin(dist[i, result.source_vertex]))
         peaks = extract.peaks(result.marginals[s], result.support.targets, params.threshold, params.peak_radius)
         parts = extract.from_result(result.marginals, result.edges, result.support, result.source_points,
-                                    result.target_points, params, source=s, unary=result.unary,
-                                    passes=result.passes)
+                                    result.target_points, params, source=s, unary=result.unary, passes=passes)
         images = [int(p.target[np.searchsorted(p.source, s)]) for p in parts if p.kind != "identity"]
         others = np.delete(dist, i, axis=0)
         for found, targets in ((found_peaks, peaks), (found_parts, images)):

@@ -30,6 +30,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+import trimesh.registration
+from scipy.spatial import cKDTree
 
 from . import geodesics, mesh
 from .files import atomic_write
@@ -105,9 +107,6 @@ def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.nda
     residual : (N,) float64
         Distance from each reflected vertex to that vertex (input units).
     """
-    import trimesh.registration
-    from scipy.spatial import cKDTree
-
     x = np.asarray(vertices, dtype=np.float64)
     x = x - x.mean(axis=0)
     tree = cKDTree(x)

@@ -289,18 +289,20 @@ def _peaks(row, t_ptr, t_idx, t_dist, threshold, radius):
 def _fit(image, n, candidate, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap):
     """How candidate fits as the image of n, over the mapped neighbours k of n.
 
-    Returns the number of them with |d_T(f(k), candidate) - d_S(k, n)| < d_error, and
-    the sum of min(|d_T(f(k), candidate) - d_S(k, n)|, cap)^2 (cap >= d_error).
+    Returns the number of them with |d_T(f(k), candidate) - d_S(k, n)| < d_error, the
+    number with that residual < cap, and the sum of min(residual, cap)^2 (cap >= d_error).
     """
     count = 0
+    within_cap = 0
     total = 0.0
     for e in range(g_ptr[n], g_ptr[n + 1]):
         k = g_nbr[e]
         if image[k] >= 0:
             r = abs(_find(t_ptr, t_idx, t_dist, image[k], candidate, g_len[e] + cap) - g_len[e])
             count += r < d_error
+            within_cap += r < cap
             total += min(r, cap) ** 2
-    return count, total
+    return count, within_cap, total
 
 
 @nb.njit(cache=True)
@@ -351,8 +353,8 @@ def _grow(norm, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, threshold, d_error, m
                 mapped += image[g_nbr[f]] >= 0
             for c in range(n_cand):
                 value = norm[n, cand[c]]
-                support = _fit(image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, d_error)[0]
-                loose = _fit(image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, 2 * d_error, 2 * d_error)[0]
+                support, loose, _ = _fit(image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error,
+                                         2 * d_error)
                 if support < min_support or 2 * loose < mapped:
                     continue
                 if support > best_support or (support == best_support and value >= best_value):
@@ -389,7 +391,7 @@ def _refine(image, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, min_neigh
             if mapped < min_neighbours:
                 continue
             best = image[n]
-            best_cost = _fit(image, n, best, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap)[1]
+            best_cost = _fit(image, n, best, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap)[2]
             current = best_cost
             if current <= mapped * d_error**2:
                 continue
@@ -402,7 +404,7 @@ def _refine(image, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, min_neigh
                 lo = row_lo + np.searchsorted(ring, g_len[e] - d_error, "right")
                 hi = row_lo + np.searchsorted(ring, g_len[e] + d_error, "left")
                 for j in range(lo, hi):
-                    cost = _fit(image, n, t_idx[j], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap)[1]
+                    cost = _fit(image, n, t_idx[j], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, cap)[2]
                     if cost < best_cost:
                         best, best_cost = t_idx[j], cost
             if best != image[n] and best_cost < 0.5 * current:

@@ -201,9 +201,7 @@ def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None =
     """
     d = np.asarray(distance, dtype=np.float64)
     if near is not None:
-        near = np.asarray(near)
-        rows = np.broadcast_to(np.arange(d.shape[0])[:, None], near.shape)
-        values = d[rows[near >= 0], near[near >= 0]]
+        values = _near_values(d, near).compressed()
         if values.size == 0:
             raise ValueError("no calibration pair: every entry of near is -1")
     else:
@@ -226,9 +224,14 @@ def row_scales(distance: np.ndarray, near: np.ndarray) -> np.ndarray:
     -------
     (S,) float64, 0 for a row without a calibration target.
     """
+    return np.ma.median(_near_values(distance, near), axis=1).filled(0.0)
+
+
+def _near_values(distance: np.ndarray, near: np.ndarray) -> np.ma.MaskedArray:
+    """(S, m) ``distance[s, near[s]]``, masked where ``near`` is -1."""
     near = np.asarray(near)
     d = np.take_along_axis(np.asarray(distance, dtype=np.float64), np.maximum(near, 0), axis=1)
-    return np.array([np.median(row[keep]) if keep.any() else 0.0 for row, keep in zip(d, near >= 0)])
+    return np.ma.masked_array(d, mask=near < 0)
 
 
 def calibrated_potential(distances: list[np.ndarray], scales: list, floor: float = 1e-3) -> np.ndarray:

@@ -112,7 +112,7 @@ class Params:
         further pass reruns BP with the earlier passes' argmax removed from the unary
         (:func:`intrinsym.model.suppress_peaks`) and its mode joins the extraction
         (beyond the paper). ``marginals`` stay the first pass's, the others are
-        ``Result.pass_marginals`` and ``Result.pass_unary``.
+        ``Result.pass_marginals``.
     pass_radius : float
         Radius about each row's argmax that a further pass removes.
     seed : int
@@ -537,9 +537,10 @@ class Result:
         Image of every input vertex under the global symmetry when detection refined it
         (``Params.zoomout``); None: ``symmetry_map.npy`` is the extraction's
         (:func:`intrinsym.extract.fitted_vertex_map`). Stored in ``result.npz``.
-    pass_marginals, pass_unary : (P - 1, S, T) float32 or None
-        Marginals (rows summing to 1) and unary of the BP passes after the first
-        (``Params.passes``); None for one pass. Stored in ``result.npz``.
+    pass_marginals : (P - 1, S, T) float32 or None
+        Marginals (rows summing to 1) of the BP passes after the first
+        (``Params.passes``); None for one pass. Stored in ``result.npz``; their unaries
+        follow from ``unary`` (:attr:`passes`).
     """
 
     source_points: np.ndarray
@@ -555,17 +556,22 @@ class Result:
     extraction: extract.Extraction | None = None
     global_map: np.ndarray | None = None
     pass_marginals: np.ndarray | None = None
-    pass_unary: np.ndarray | None = None
 
     ARRAYS = ("source_points", "target_points", "source_vertex", "target_vertex", "edges", "unary", "marginals")
-    PASS_ARRAYS = ("pass_marginals", "pass_unary")
 
     @property
     def passes(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(marginals, unary) of every BP pass after the first, as the extraction takes them."""
-        if self.pass_marginals is None or self.pass_unary is None:
+        """(marginals, unary) of every BP pass after the first, as the extraction takes
+        them: each pass's unary is the one before it with the argmax of the pass before
+        it removed (:func:`intrinsym.model.suppress_peaks`), as :func:`detect` ran them."""
+        if self.pass_marginals is None:
             return []
-        return list(zip(self.pass_marginals, self.pass_unary))
+        floor = self.info["resolved"]["unary_floor"]
+        out, unary = [], self.unary
+        for before, marginals in zip([self.marginals, *self.pass_marginals], self.pass_marginals):
+            unary = model.suppress_peaks(unary, before, self.support.targets, self.params.pass_radius, floor)
+            out.append((marginals, unary))
+        return out
 
     def save(self, out_dir: str | os.PathLike) -> Path:
         """Write ``out_dir/result.npz`` and ``out_dir/run.json`` (atomically), and with an
@@ -577,9 +583,8 @@ class Result:
             arrays.update(self.support.to_arrays())
         if self.global_map is not None:
             arrays["global_map"] = np.asarray(self.global_map, dtype=np.int64)
-        for name in self.PASS_ARRAYS:
-            if getattr(self, name) is not None:
-                arrays[name] = np.asarray(getattr(self, name), dtype=np.float32)
+        if self.pass_marginals is not None:
+            arrays["pass_marginals"] = np.asarray(self.pass_marginals, dtype=np.float32)
         run = {"params": dataclasses.asdict(self.params), **self.info}
         atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
         atomic_write(out / "run.json", lambda f: json.dump(run, f, indent=2))
@@ -617,7 +622,7 @@ class Result:
             has_support = all(key in z.files for key in extract.Support.KEYS)
             keys = extract.Support.KEYS + tuple(k for k in extract.Support.OPTIONAL_KEYS if k in z.files)
             support = extract.Support.from_arrays({k: z[k] for k in keys}) if has_support else None
-            optional = {key: z[key] for key in ("global_map", *cls.PASS_ARRAYS) if key in z.files}
+            optional = {key: z[key] for key in ("global_map", "pass_marginals") if key in z.files}
         run = json.loads((out / "run.json").read_text())
         params = Params(**run.pop("params"))
         return cls(**arrays, params=params, info=run, support=support, **optional)
@@ -712,14 +717,17 @@ def _solve(
     runs = [bp.belief_propagation(
         mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
     )]
+    marginals = [runs[0].marginals.astype(np.float32)]
     passes = []
     for _ in range(1, n_passes):
-        mrf = dataclasses.replace(mrf, unary=model.suppress_peaks(mrf.unary, runs[-1].marginals, targets,
+        # Result.passes derives these unaries again from the stored marginals
+        mrf = dataclasses.replace(mrf, unary=model.suppress_peaks(mrf.unary, marginals[-1], targets,
                                                                   p.pass_radius, floor))
         runs.append(bp.belief_propagation(
             mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
         ))
-        passes.append((runs[-1].marginals.astype(np.float32), mrf.unary))
+        marginals.append(runs[-1].marginals.astype(np.float32))
+        passes.append((marginals[-1], mrf.unary))
     res = runs[0]
     clock.lap("bp")
     support = extract.Support(
@@ -732,7 +740,7 @@ def _solve(
         target_vertices=tgt.input_vertices,
     )
     extraction = extract.from_result(
-        res.marginals, edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary,
+        marginals[0], edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary,
         passes=passes,
     )
     clock.lap("extract")
@@ -785,14 +793,13 @@ def _solve(
         target_vertex=tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
         edges=edges.astype(np.int64),
         unary=unary,
-        marginals=res.marginals.astype(np.float32),
+        marginals=marginals[0],
         params=p,
         info=info,
         support=support,
         extraction=extraction,
         global_map=global_map,
-        pass_marginals=np.stack([m for m, _ in passes]) if passes else None,
-        pass_unary=np.stack([u for _, u in passes]) if passes else None,
+        pass_marginals=np.stack(marginals[1:]) if passes else None,
     )
 
 

@@ -327,7 +327,8 @@ def seeded_symmetry(
     target_vertices: np.ndarray | None = None,
     target_evecs: np.ndarray | None = None,
 ) -> np.ndarray:
-    """A self-map from sparse correspondences, refined by ZoomOut to vertex precision.
+    """A map from sparse correspondences, refined by ZoomOut to vertex precision: a
+    self-map, or with ``target_vertices`` / ``target_evecs`` a map into another shape.
 
     The correspondences choose the symmetry, ZoomOut gives the precision: the functional
     map ``C`` (k_seed x k_seed) is the least-squares solution of ``phi[target, :k_seed]
