@@ -48,6 +48,18 @@ def test_suppress_trivial():
     assert unary[0, 0] == 0.5  # input untouched
 
 
+def test_weighted_trivial_match_peaks_at_the_weight_times_the_rows_best_elsewhere():
+    unary = np.array([[0.9, 0.6, 0.4, 0.2], [0.1, 0.3, 0.8, 0.05]])
+    dist = np.array([[0.0, 0.03, 0.2, 0.3], [0.01, 0.3, 0.2, np.inf]])
+    out = suppress_trivial(unary, dist, 0.05, 0.01, weight=0.5)
+    # row 0: the identity's peak 0.9 goes to 0.5 * 0.4, its shape kept (0.6 -> 0.1333)
+    assert out[0] == pytest.approx([0.2, 0.6 * 0.2 / 0.9, 0.4, 0.2])
+    # row 1: 0.1 is below 0.5 * 0.8 already, and it is never raised
+    assert out[1] == pytest.approx(unary[1])
+    low = suppress_trivial(unary, dist, 0.05, 0.15, weight=0.5)
+    assert low[0, 1] == 0.15  # not below the floor
+
+
 def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
     # targets on a line at 0, 0.03, 0.06, 0.1, 0.3; distances kept up to 0.12
     x = np.array([0.0, 0.03, 0.06, 0.1, 0.3])

@@ -38,7 +38,10 @@ MODEL_OPTIONS = [
     ("--bp-tol", "bp_tol", float, f"stop BP when the largest message change is below this (default {D.bp_tol})"),
     ("--damping", "damping", float, f"message damping in [0, 1) (default {D.damping})"),
     ("--backend", "backend", str, f"where BP runs: auto (GPU if CuPy sees one and --schedule flooding), cpu or gpu (default {D.backend})"),
-    ("--trivial-radius", "trivial_radius", float, f"radius of the removed trivial match, units of sqrt(area) (default {D.trivial_radius})"),
+    ("--trivial-radius", "trivial_radius", float, f"radius of the trivial match, units of sqrt(area) (default {D.trivial_radius})"),
+    ("--trivial-weight", "trivial_weight", float, f"the trivial match's largest unary as a fraction of the row's largest "
+                                                  f"elsewhere, in [0, 1); 0 removes it, 0.7 keeps it as the answer 'no partner' "
+                                                  f"on shapes whose symmetries are only partial (default {D.trivial_weight})"),
     ("--passes", "passes", int, "BP passes; each further pass removes the earlier passes' argmax from the unary "
                                 "and finds another mode (default: 1 for detect, 2 for match)"),
     ("--pass-radius", "pass_radius", float, f"radius about each argmax that a further pass removes, units of "
@@ -76,13 +79,13 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
                    help="parameter preset; 'paper' sets rho 0.4, gamma 0.01, serial schedule, 100 iterations "
                         "and keeps the trivial match (default: default)")
     for flag, dest, typ, text in MODEL_OPTIONS:
-        if dest == "trivial_radius" and not self_match:
+        if dest in ("trivial_radius", "trivial_weight") and not self_match:
             continue
         p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
     if self_match:
         g = p.add_mutually_exclusive_group()
         g.add_argument("--remove-trivial", dest="remove_trivial", action="store_true", default=None,
-                       help="put the unary at its floor near each source point (default, except with --preset paper)")
+                       help="weaken the trivial match to --trivial-weight (default, except with --preset paper)")
         g.add_argument("--keep-trivial", dest="remove_trivial", action="store_false",
                        help="keep the trivial (identity) match in the model, as the paper does")
     p.add_argument("--unary-seeds", dest="unary_seeds", action=argparse.BooleanOptionalAction, default=None,

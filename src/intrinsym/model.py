@@ -118,12 +118,22 @@ def pairwise_dense(d_edge: float, target_dist: np.ndarray, lam: float, rho: floa
 
 
 def suppress_trivial(
-    unary: np.ndarray, source_target_dist: np.ndarray, radius: float, floor: float
+    unary: np.ndarray, source_target_dist: np.ndarray, radius: float, floor: float, weight: float = 0.0
 ) -> np.ndarray:
-    """Remove the trivial (identity) match from a self-matching unary.
+    """Weaken the trivial (identity) match of a self-matching unary.
 
-    Every target within geodesic ``radius`` of the source sample gets the unary's floor,
-    so the identity is no longer favoured by the data term (DESIGN.md, "Identity").
+    The targets within geodesic ``radius`` of the source sample (the identity's mode)
+    are scaled so that their largest value is ``weight`` times the row's largest value
+    beyond ``radius`` (never raised, never below ``floor``); ``weight`` 0 puts them at
+    the floor, i.e. removes the identity (DESIGN.md, "Identity").
+
+    With 0 < ``weight`` < 1 the identity stays in the model as the answer "no symmetric
+    partner": a consistent field like any symmetry, which a symmetry's consistent field
+    of better descriptor matches outbids, but which outbids the self-maps that BP
+    otherwise invents where a shape has no symmetry (every row must put its mass
+    somewhere, and the truncated pairwise term rewards any map that keeps short
+    distances) - and a true symmetry, too, where its descriptor matches are weak
+    (``intrinsym.Params.trivial_weight``).
 
     Parameters
     ----------
@@ -133,14 +143,22 @@ def suppress_trivial(
         range that was computed).
     radius : float
     floor : float
+    weight : float
+        In [0, 1).
 
     Returns
     -------
     (S, T) array, a modified copy.
     """
     out = np.array(unary, copy=True)
-    out[np.asarray(source_target_dist) <= radius] = floor
-    return out
+    near = np.asarray(source_target_dist) <= radius
+    if weight <= 0:
+        out[near] = floor
+        return out
+    far_max = np.where(near, 0.0, out).max(axis=1)
+    near_max = np.where(near, out, 0.0).max(axis=1)
+    scale = np.minimum(1.0, weight * far_max / np.maximum(near_max, np.finfo(np.float64).tiny))
+    return np.where(near, np.maximum(out * scale[:, None], floor), out).astype(out.dtype, copy=False)
 
 
 def suppress_peaks(
