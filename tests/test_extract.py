@@ -192,6 +192,19 @@ def test_unary_peaks_seed_the_symmetries_bp_lost():
     assert tuple(ROTATION.tolist()) in images and tuple(MIRROR.tolist()) in images
 
 
+def test_a_map_grown_where_the_marginals_hold_no_peak_is_not_global():
+    """Marginals with the identity alone (every point "has no partner"), a unary with a
+    full rotation: the rotation is extracted from the unary's seeds but, its pairs far
+    below the marginals' peaks, it is not the shape's global symmetry."""
+    p = ExtractParams(d_error=0.01)
+    result = extract(marginals(with_mirror=np.zeros(0, np.int64)), GRAPH, TARGETS, p, self_target=SELF, unary=marginals(mirror=ROTATION))
+    assert [(s.target.tolist(), s.kind) for s in result.symmetries] == [(ROTATION.tolist(), "partial")]
+    assert result.global_index == -1
+    # marginals that do peak on it make it global
+    result = extract(marginals(mirror=ROTATION), GRAPH, TARGETS, p, self_target=SELF)
+    assert result.global_index == 0 and result.symmetries[0].kind == "global"
+
+
 def test_later_passes_add_their_modes_scored_on_their_own_marginals():
     """Pass 1 kept the mirror, pass 2 (mirror removed) the rotation: both are extracted,
     each scored on its own pass; the unary of pass 2 seeds what neither pass kept."""

@@ -50,7 +50,8 @@ class ExtractParams:
         correspondence is the identity, any other map never takes trivial ones.
     global_fraction : float
         The dominant non-identity symmetry is "global" when it covers at least this
-        fraction of the source samples.
+        fraction of the source samples (and its pairs average ``threshold`` on the
+        normalised marginals).
     seeds_per_sample : int
         :func:`extract` seeds region growings from at most this many (the strongest)
         peaks of each source sample.
@@ -737,7 +738,8 @@ def extract(
     non-identity parts separately, so that the two never fuse where they coincide, e.g.
     on a mirror plane; the unary's parts only where they add a map), and the
     best-ranked non-identity map covering at least ``global_fraction`` of the source
-    samples is the global one.
+    samples, whose normalised marginal averages at least ``threshold`` over its pairs,
+    is the global one.
 
     Parameters
     ----------
@@ -785,7 +787,10 @@ def extract(
         for image in _merge(largest_first(kind, False), graph, targets, p, largest_first(kind, True))
     ]
     symmetries = sorted(symmetries, key=lambda s: -s.score)[: p.max_count * n_main]
-    wide = [i for i, sym in enumerate(symmetries) if sym.kind == "partial" and len(sym.source) >= p.global_fraction * n_s]
+    # a global map is made of marginal peaks: one grown across rows without a peak
+    # there (on the unary, say, where the marginals hold the identity) is not
+    wide = [i for i, sym in enumerate(symmetries) if sym.kind == "partial" and len(sym.source) >= p.global_fraction * n_s
+            and norm[sym.source, sym.target].mean() >= p.threshold]
     global_index = wide[0] if wide else -1
     if global_index >= 0:
         full = refine(graph, targets, complete(norm, graph, targets, symmetries[global_index].image(n_s), p), p)
