@@ -9,8 +9,9 @@ shapes of :mod:`intrinsym.shapes` and checks the issue's acceptance criteria:
 2. star (5 arms, self-matching) and lantern (4 arms, frame A matched to frame B): every
    arm is mapped onto every other arm (and, in two-shape mode, onto itself) by an
    extracted symmetry that carries at least half of the arm's source samples there;
-3. the paper's segmentation score of the extracted symmetry that realises the shape's
-   principal ground-truth map is at least 0.90 for every labelled part.
+3. the paper's segmentation score of the extracted symmetry that best realises one of
+   the shape's ground-truth maps is at least 0.90 for every labelled part (and, for the
+   cuboctahedron, how many of its 47 maps are realised that well).
 
 The symmetric shapes run several BP passes (``PASSES``; each further pass finds
 another mode of the posterior, see ``intrinsym.Params.passes``), the others the
@@ -165,41 +166,28 @@ def arm_matrix(result: intrinsym.Result, source_labels: np.ndarray, target_label
     return share
 
 
-def principal_segmentation(result: intrinsym.Result, truth: np.ndarray, labels: np.ndarray,
-                           source: shapes.GeneratedShape, target: shapes.GeneratedShape) -> tuple[dict, int]:
-    """Segmentation scores of the extracted symmetry that best realises ``truth``.
+def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
+                target: shapes.GeneratedShape) -> list[np.ndarray]:
+    """Every extracted symmetry extended to the input vertices.
 
-    Every extracted symmetry is extended to the input vertices: one that covers at least
-    ``global_fraction`` of the source samples by seeded ZoomOut from its sample pairs
-    (:func:`intrinsym.spectral.seeded_symmetry`, as ``symmetry_map.npy`` is made, in
-    two-shape mode from ``source`` into ``target``), the others by
-    :func:`intrinsym.extract.fitted_vertex_map`. Each is scored with
-    :func:`intrinsym.evaluate.segmentation_scores`; the one with the best mean score is
-    the pipeline's version of the principal map.
-
-    Returns
-    -------
-    scores : dict
-        Part label -> score (empty when nothing was extracted).
-    index : int
-        Its index in ``result.extraction.symmetries`` (-1 for none).
+    One that covers at least ``global_fraction`` of the source samples by seeded ZoomOut
+    from its sample pairs (:func:`intrinsym.spectral.seeded_symmetry`, as
+    ``symmetry_map.npy`` is made, in two-shape mode from ``source`` into ``target``), the
+    others by :func:`intrinsym.extract.fitted_vertex_map`.
     """
     params = result.params.extraction()
     evecs = [descriptors.eigenpairs(g.vertices, g.faces, EIGENPAIRS)[1] for g in (source, target)]
     other = {} if source is target else dict(target_vertices=target.vertices, target_evecs=evecs[1])
-    best, best_index = {}, -1
-    for i, sym in enumerate(result.extraction.symmetries):
+    maps = []
+    for sym in result.extraction.symmetries:
         if len(sym.source) >= params.global_fraction * len(result.marginals):
-            vmap = spectral.seeded_symmetry(source.vertices, evecs[0], result.source_vertex[sym.source],
-                                            result.target_vertex[sym.target], result.params.zoomout_seed,
-                                            result.params.zoomout_final, **other)
+            maps.append(spectral.seeded_symmetry(source.vertices, evecs[0], result.source_vertex[sym.source],
+                                                 result.target_vertex[sym.target], result.params.zoomout_seed,
+                                                 result.params.zoomout_final, **other))
         else:
-            vmap = extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
-                                             result.target_points, result.target_vertex, params)
-        scores = evaluate.segmentation_scores(vmap, truth, labels)
-        if not best or np.mean(list(scores.values())) > np.mean(list(best.values())):
-            best, best_index = scores, i
-    return best, best_index
+            maps.append(extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
+                                                  result.target_points, result.target_vertex, params))
+    return maps
 
 
 def check_arms(report: Report, name: str, result: intrinsym.Result, labels_a: np.ndarray, labels_b: np.ndarray,
@@ -215,10 +203,24 @@ def check_arms(report: Report, name: str, result: intrinsym.Result, labels_a: np
 
 def check_segmentation(report: Report, name: str, result: intrinsym.Result, source: shapes.GeneratedShape,
                        target: shapes.GeneratedShape) -> None:
-    scores, index = principal_segmentation(result, source.symmetries[0], source.labels, source, target)
-    values = np.array(list(scores.values())) if scores else np.zeros(1)
-    text = " ".join(f"{v:.2f}" for v in values)
-    report.add(name, f"segmentation per part (symmetry #{index})", text, bool(values.min() >= SEGMENTATION))
+    """The paper's segmentation scores (:func:`intrinsym.evaluate.segmentation_scores`)
+    of the extracted symmetry that best realises a ground-truth map, the best pair by
+    mean score over the parts, scored against that map; and how many of the ground-truth
+    maps some symmetry realises with every part at least ``SEGMENTATION``. Every
+    ground-truth map of ``source.symmetries`` is a candidate: a shape with a symmetry
+    group has no one principal map (the cuboctahedron's 47 are alike)."""
+    scores = np.array([[list(evaluate.segmentation_scores(vmap, truth, source.labels).values())
+                        for truth in source.symmetries] for vmap in vertex_maps(result, source, target)])
+    if not scores.size:
+        report.add(name, "segmentation per part", "nothing extracted", False)
+        return
+    index, truth = np.unravel_index(np.argmax(scores.mean(axis=2)), scores.shape[:2])
+    values = scores[index, truth]
+    report.add(name, f"segmentation per part (symmetry #{index}, truth #{truth})",
+               " ".join(f"{v:.2f}" for v in values), bool(values.min() >= SEGMENTATION))
+    realised = (scores.min(axis=2) >= SEGMENTATION).any(axis=0)
+    report.add(name, f"ground-truth maps realised, every part >= {SEGMENTATION}",
+               f"{realised.sum()}/{len(realised)}", None)
 
 
 def summary(report: Report, name: str, result: intrinsym.Result, seconds: float) -> None:
