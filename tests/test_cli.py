@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 
+import intrinsym
 from intrinsym import cli
 
 SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
@@ -27,6 +28,16 @@ def test_detect_example_writes_result(tmp_path):
     assert (out / "result.npz").is_file() and (out / "run.json").is_file()
     with np.load(out / "result.npz") as z:
         assert z["marginals"].shape == (30, 300)
+
+
+def test_detect_trivial_weight(tmp_path):
+    out = tmp_path / "spot"
+    assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
+    assert json.loads((out / "run.json").read_text())["params"]["trivial_weight"] == 0.5
+    # match has no trivial match to weigh
+    spot = intrinsym.example_path()
+    p = run("match", spot, spot, "-o", tmp_path / "m", "--trivial-weight", "0.5")
+    assert p.returncode == 2 and "unrecognized arguments: --trivial-weight" in p.stderr
 
 
 def test_evaluate_command(tmp_path, mirror):
