@@ -176,12 +176,14 @@ def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
     others by :func:`intrinsym.extract.fitted_vertex_map`.
     """
     params = result.params.extraction()
-    evecs = [descriptors.eigenpairs(g.vertices, g.faces, EIGENPAIRS)[1] for g in (source, target)]
-    other = {} if source is target else dict(target_vertices=target.vertices, target_evecs=evecs[1])
+    evecs = descriptors.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
+    other = {} if source is target else dict(
+        target_vertices=target.vertices,
+        target_evecs=descriptors.eigenpairs(target.vertices, target.faces, EIGENPAIRS)[1])
     maps = []
     for sym in result.extraction.symmetries:
         if len(sym.source) >= params.global_fraction * len(result.marginals):
-            maps.append(spectral.seeded_symmetry(source.vertices, evecs[0], result.source_vertex[sym.source],
+            maps.append(spectral.seeded_symmetry(source.vertices, evecs, result.source_vertex[sym.source],
                                                  result.target_vertex[sym.target], result.params.zoomout_seed,
                                                  result.params.zoomout_final, **other))
         else:

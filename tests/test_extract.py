@@ -197,7 +197,8 @@ def test_a_map_grown_where_the_marginals_hold_no_peak_is_not_global():
     full rotation: the rotation is extracted from the unary's seeds but, its pairs far
     below the marginals' peaks, it is not the shape's global symmetry."""
     p = ExtractParams(d_error=0.01)
-    result = extract(marginals(with_mirror=np.zeros(0, np.int64)), GRAPH, TARGETS, p, self_target=SELF, unary=marginals(mirror=ROTATION))
+    identity_only = marginals(with_mirror=np.zeros(0, np.int64))
+    result = extract(identity_only, GRAPH, TARGETS, p, self_target=SELF, unary=marginals(mirror=ROTATION))
     assert [(s.target.tolist(), s.kind) for s in result.symmetries] == [(ROTATION.tolist(), "partial")]
     assert result.global_index == -1
     # marginals that do peak on it make it global

@@ -150,15 +150,12 @@ def suppress_trivial(
     -------
     (S, T) array, a modified copy.
     """
-    out = np.array(unary, copy=True)
+    unary = np.asarray(unary)
     near = np.asarray(source_target_dist) <= radius
-    if weight <= 0:
-        out[near] = floor
-        return out
-    far_max = np.where(near, 0.0, out).max(axis=1)
-    near_max = np.where(near, out, 0.0).max(axis=1)
+    far_max = np.where(near, 0.0, unary).max(axis=1)
+    near_max = np.where(near, unary, 0.0).max(axis=1)
     scale = np.minimum(1.0, weight * far_max / np.maximum(near_max, np.finfo(np.float64).tiny))
-    return np.where(near, np.maximum(out * scale[:, None], floor), out).astype(out.dtype, copy=False)
+    return np.where(near, np.maximum(unary * scale[:, None], floor), unary).astype(unary.dtype, copy=False)
 
 
 def suppress_peaks(
