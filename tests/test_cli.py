@@ -33,7 +33,16 @@ def test_detect_example_writes_result(tmp_path):
 def test_detect_trivial_weight(tmp_path):
     out = tmp_path / "spot"
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
-    assert json.loads((out / "run.json").read_text())["params"]["trivial_weight"] == 0.5
+    run_json = json.loads((out / "run.json").read_text())
+    assert run_json["params"]["trivial_weight"] == 0.5 and "identity" not in run_json
+    # auto: a threshold no BP argmax reaches keeps the identity at the fallback weight
+    assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "auto",
+                     "--isometry-threshold", "1.0"]) == 0
+    identity = json.loads((out / "run.json").read_text())["identity"]
+    assert identity["isometry"] < 1.0 and identity["weight"] == intrinsym.pipeline.NO_PARTNER_WEIGHT
+    p = run("detect", "--example", "-o", tmp_path / "bad", "--trivial-weight", "some")
+    assert p.returncode == 2 and "expected 'auto' or a number, got 'some'" in p.stderr
+    assert not (tmp_path / "bad").exists()
     # match has no trivial match to weigh
     spot = intrinsym.example_path()
     p = run("match", spot, spot, "-o", tmp_path / "m", "--trivial-weight", "0.5")

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from intrinsym.evaluate import load_symmetry_map, marginal_scores
+from intrinsym.evaluate import load_symmetry_map, marginal_scores, partial_scores
 from intrinsym.mesh import InputError
 
 
@@ -28,6 +28,29 @@ def test_marginal_scores_by_hand():
     assert s.decoy_recall == 0.5
     # breadth: row 0 two of four targets >= 0.25, row 1 one of four
     assert s.breadth == pytest.approx((0.5 + 0.25) / 2)
+
+
+def test_partial_scores_by_hand():
+    # a flat 4 x 1 strip (sqrt(area) = 2, so near = 0.1 is 0.2 input units) with parts at
+    # both ends (x < 0.8 and x > 3.2) that the reflection x -> 4 - x swaps
+    xs, ys = np.linspace(0, 4, 41), np.linspace(0, 1, 11)
+    verts = np.array([[x, y, 0.0] for x in xs for y in ys])
+    at = lambda x, y: int(round(x * 10)) * 11 + int(round(y * 10))  # noqa: E731
+    quads = [(at(x, y), at(x + 0.1, y), at(x + 0.1, y + 0.1), at(x, y + 0.1)) for x in xs[:-1] for y in ys[:-1]]
+    faces = np.array([f for a, b, c, d in quads for f in ((a, b, c), (a, c, d))])
+    labels = np.where(verts[:, 0] < 0.75, 1, np.where(verts[:, 0] > 3.25, 2, 0))
+    mirror = np.array([at(4 - x, y) for x, y, _ in verts])
+    sources = [at(0.3, 0.5), at(0.5, 0.5), at(2.0, 0.5), at(2.5, 0.5), at(0.9, 0.5)]
+    marg = np.zeros((5, len(verts)))
+    marg[0, at(3.7, 0.5)] = 1.0  # on its true image: hit, all mass there
+    marg[1, at(1.5, 0.5)], marg[1, at(3.5, 0.5)] = 0.6, 0.4  # argmax on the body: miss
+    marg[2, at(0.5, 0.2)] = 1.0  # off the parts, all mass on one place: an invented symmetry
+    marg[3, at(1.0, 0.5)], marg[3, at(3.0, 0.5)] = 0.5, 0.5  # off, split between two places
+    marg[4, at(3.1, 0.5)] = 1.0  # 0.1 input units from part 1: scored as neither
+    p = partial_scores(verts, faces, labels, mirror, marg, np.array(sources), np.arange(len(verts)))
+    assert p.limb_hit == 0.5
+    assert p.limb_mass.tolist() == pytest.approx([1.0, 0.6])
+    assert p.off_mass.tolist() == pytest.approx([1.0, 0.5])
 
 
 def test_symmetry_map_formats(tmp_path):

@@ -103,7 +103,9 @@ def test_scale_free(spot, spot_result):
 
 def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     kept = intrinsym.detect(spot, remove_trivial=False, **SMALL)
-    removed = spot_result  # the default removes it
+    removed = spot_result  # the default ("auto") removes it: spot's mirror is a near-isometry
+    identity = removed.info["identity"]
+    assert identity["weight"] == 0.0 and identity["isometry"] >= identity["threshold"], identity
     weighted = intrinsym.detect(spot, trivial_weight=0.7, **SMALL)
     assert np.array_equal(kept.target_vertex, removed.target_vertex)
     floor = np.float32(removed.info["resolved"]["unary_floor"])
@@ -137,6 +139,7 @@ def test_paper_preset():
     p = pipeline.make_params("paper")
     assert (p.rho, p.gamma, p.schedule, p.iterations, p.remove_trivial) == (0.4, 0.01, "serial", 100, False)
     assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
+    assert p.trivial_weight == 0.0 and pipeline.make_params().trivial_weight == "auto"
     assert not p.unary_seeds and not p.extraction().unary_seeds
     assert pipeline.make_params().extraction().unary_seeds
     assert p.extraction().vertex_fit == 0 and pipeline.make_params(vertex_fit=0.5).extraction().vertex_fit == 0.5
@@ -147,9 +150,12 @@ def test_paper_preset():
         pipeline.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):
         pipeline.make_params(rho=1.5)
-    for bad in (-0.1, 1.0):
+    for bad in (-0.1, 1.0, "sometimes", None):
         with pytest.raises(intrinsym.ParameterError, match="trivial_weight"):
             pipeline.make_params(trivial_weight=bad)
+    for bad in (-0.1, 1.5):
+        with pytest.raises(intrinsym.ParameterError, match="isometry_threshold"):
+            pipeline.make_params(isometry_threshold=bad)
 
 
 def test_point_cloud_input(spot):

@@ -43,8 +43,11 @@ def mirror_results():
 
     v, f, sym = mirror_shape()
     # one width per term (the per-sample widths of "local" are tested on the
-    # cuboctahedron below; here they widen WKS alone to breadth 0.029)
-    out = {name: intrinsym.detect(Shape(v, f), unary=name, calibration="both", **SMALL)
+    # cuboctahedron below; here they widen WKS alone to breadth 0.029), and the identity
+    # removed: at this size "auto" keeps it for WKS alone (its argmax keeps 0.83 of the
+    # edges, mixing the mirror and the front-back symmetry), which would add the
+    # identity's band to the unary under test
+    out = {name: intrinsym.detect(Shape(v, f), unary=name, calibration="both", trivial_weight=0.0, **SMALL)
            for name in ("wks", "wks*spin")}
     out["paper"] = intrinsym.detect(Shape(v, f), preset="paper", **SMALL)
     return Shape(v, f), sym, out
@@ -131,30 +134,10 @@ NEAR = 0.10  # sqrt(area) units, as in evaluate
 
 
 def partial_scores(g, r):
-    """Limb mirror hit, peak masses on and off the limbs, and the extracted symmetries.
-
-    Peak mass of a row: the marginal mass within NEAR of its argmax over targets farther
-    than NEAR from the source point. A point with a symmetric image concentrates its
-    mass there; a point without one (off the limbs) spreads it, unless the model invents
-    a symmetry. Off-limb points are those farther than NEAR from every limb vertex (the
-    body around the limb bases is symmetric too, locally).
-    """
-    import scipy.sparse.csgraph as csgraph
-
-    from intrinsym import geodesics, mesh
-
-    v = g.vertices / np.sqrt(mesh.surface_area(Shape(g.vertices, g.faces)))
-    graph = geodesics.surface_graph(v, g.faces)
-    sv, tv = r.source_vertex, r.target_vertex
-    d_s = geodesics.distances_from(graph, sv)[:, tv]
-    d_limb = csgraph.dijkstra(graph, indices=np.flatnonzero(g.labels > 0), min_only=True)
-    on, off = g.labels[sv] > 0, (g.labels[sv] == 0) & (d_limb[sv] > NEAR)
-    marg = r.marginals / r.marginals.sum(axis=1, keepdims=True)
-    best = np.where(d_s > NEAR, marg, -1.0).argmax(axis=1)
-    d_image = geodesics.distances_from(graph, g.symmetries[0][sv[on]])[:, tv]
-    hit = d_image[np.arange(on.sum()), best[on]] <= NEAR
-    mass = np.sum(marg * (geodesics.distances_from(graph, tv[best])[:, tv] <= NEAR), axis=1)
-    return float(hit.mean()), mass[on], mass[off]
+    """Limb hit and the peak masses on and off the limbs (:func:`evaluate.partial_scores`)."""
+    p = evaluate.partial_scores(g.vertices, g.faces, g.labels, g.symmetries[0], r.marginals, r.source_vertex,
+                                r.target_vertex, NEAR)
+    return p.limb_hit, p.limb_mass, p.off_mass
 
 
 @pytest.fixture(scope="module")
@@ -225,16 +208,20 @@ def test_local_calibration_keeps_every_other_vertex_of_the_cuboctahedron():
 
 
 def test_the_weighted_identity_keeps_off_limb_points_home_and_limbs_on_each_other(partial_shape):
-    # With the trivial match removed (the default), every row must put its mass
-    # somewhere and BP invents a smooth self-map of the asymmetric body (a false
-    # symmetry off the limbs). Weighted, the identity answers "no partner" there, and
-    # the limbs still take each other. Measured at this size, seeds 0-2: off-limb peak
+    # With the trivial match removed, every row must put its mass somewhere and BP
+    # invents a smooth self-map of the asymmetric body (a false symmetry off the limbs).
+    # Weighted (the default "auto" chooses it here), the identity answers "no partner"
+    # there, and the limbs still take each other. Measured at this size, seeds 0-2: off-limb peak
     # mass median 0.88-0.89 removed, 0.03-0.12 weighted; limb hit 0.96-1.00 both. (At
     # 120 / 1500 samples the limbs' evidence is too thin: BP loses them on some seeds
     # either way.)
     g = partial_shape
     size = dict(PARTIAL, n_source=150, n_target=2000)
-    removed, weighted = (intrinsym.detect(Shape(g.vertices, g.faces), trivial_weight=w, **size) for w in (0.0, 0.7))
+    removed, weighted = (intrinsym.detect(Shape(g.vertices, g.faces), trivial_weight=w, **size)
+                         for w in (0.0, "auto"))
+    # "auto" sees that the removed identity's BP map is no near-isometry and keeps it
+    identity = weighted.info["identity"]
+    assert identity["isometry"] < identity["threshold"] and identity["weight"] == pipeline.NO_PARTNER_WEIGHT
     (hit_removed, _, off_removed), (hit, _, off) = partial_scores(g, removed), partial_scores(g, weighted)
     assert hit >= 0.9 and hit_removed >= 0.9, (hit, hit_removed)
     assert np.median(off) < 0.2 and np.median(off_removed) > 0.6, (np.median(off), np.median(off_removed))

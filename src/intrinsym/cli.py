@@ -19,6 +19,17 @@ from . import __version__, bench, evaluate, example_path, extract, mesh, pipelin
 
 D = pipeline.Params()
 
+
+def _weight(text: str) -> float | str:
+    """--trivial-weight: 'auto' or a number (its range is checked by Params)."""
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got {text!r}") from None
+
+
 # (flag, Params field, type, help); defaults come from Params and the preset.
 MODEL_OPTIONS = [
     ("--source", "n_source", int, f"number of source samples |Ps| (default {D.n_source}; paper Table 1: 111-479)"),
@@ -39,9 +50,14 @@ MODEL_OPTIONS = [
     ("--damping", "damping", float, f"message damping in [0, 1) (default {D.damping})"),
     ("--backend", "backend", str, f"where BP runs: auto (GPU if CuPy sees one and --schedule flooding), cpu or gpu (default {D.backend})"),
     ("--trivial-radius", "trivial_radius", float, f"radius of the trivial match, units of sqrt(area) (default {D.trivial_radius})"),
-    ("--trivial-weight", "trivial_weight", float, f"the trivial match's largest unary as a fraction of the row's largest "
-                                                  f"elsewhere, in [0, 1); 0 removes it, 0.7 keeps it as the answer 'no partner' "
-                                                  f"on shapes whose symmetries are only partial (default {D.trivial_weight})"),
+    ("--trivial-weight", "trivial_weight", _weight,
+     "the trivial match's largest unary as a fraction of the row's largest elsewhere, in [0, 1); 0 removes it, "
+     "0.7 keeps it as the answer 'no partner' on shapes whose symmetries are only partial; auto: 0, unless BP's "
+     f"argmax keeps fewer than --isometry-threshold of the source edges, then {pipeline.NO_PARTNER_WEIGHT} "
+     f"(default {D.trivial_weight})"),
+    ("--isometry-threshold", "isometry_threshold", float,
+     "share of source edges whose length BP's argmax keeps within --d-error or one target spacing below which "
+     f"--trivial-weight auto keeps the identity (default {D.isometry_threshold})"),
     ("--passes", "passes", int, "BP passes; each further pass removes the earlier passes' argmax from the unary "
                                 "and finds another mode (default: 1 for detect, 2 for match)"),
     ("--pass-radius", "pass_radius", float, f"radius about each argmax that a further pass removes, units of "
@@ -79,7 +95,7 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
                    help="parameter preset; 'paper' sets rho 0.4, gamma 0.01, serial schedule, 100 iterations "
                         "and keeps the trivial match (default: default)")
     for flag, dest, typ, text in MODEL_OPTIONS:
-        if dest in ("trivial_radius", "trivial_weight") and not self_match:
+        if dest in ("trivial_radius", "trivial_weight", "isometry_threshold") and not self_match:
             continue
         p.add_argument(flag, dest=dest, type=typ, default=None, help=text)
     if self_match:

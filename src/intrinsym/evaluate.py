@@ -11,6 +11,14 @@ symmetry plane has nothing to find).
   s and g (chance level: a flat marginal passes peak and decoy recall alike);
 * breadth: the mean fraction of targets whose marginal reaches half the row maximum.
 
+Scores of a symmetry that is only partial (labelled parts with a true image, the rest
+of the shape without one; :func:`partial_scores`):
+
+* limb hit: the mirror hit over the source samples on the labelled parts;
+* peak mass: a row's marginal mass within ``near`` of its argmax over targets farther
+  than ``near`` from s. A point with a symmetric image concentrates its mass there; a
+  point without one (off the parts) spreads it, unless the model invents a symmetry.
+
 Scores of an extracted symmetry map (one image per input vertex):
 
 * correspondence curve: the fraction of vertices whose predicted image lies within
@@ -31,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 import trimesh.registration
+from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from . import geodesics, mesh
@@ -119,6 +128,66 @@ def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.nda
         if best is None or np.median(residual) < np.median(best[1]):
             best = (sym.astype(np.int64), residual)
     return best
+
+
+@dataclass(frozen=True)
+class PartialScores:
+    """Scores of a partial symmetry (see the module docstring).
+
+    Attributes
+    ----------
+    limb_hit : float
+        Mirror hit over the source samples on the labelled parts.
+    limb_mass, off_mass : (n_on,), (n_off,) float64
+        Peak mass of each source sample on a labelled part, and of each one farther
+        than ``near`` from every labelled part (the body around a part's base is
+        locally symmetric too, so it is scored as neither).
+    """
+
+    limb_hit: float
+    limb_mass: np.ndarray
+    off_mass: np.ndarray
+
+
+def partial_scores(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    labels: np.ndarray,
+    symmetry: np.ndarray,
+    marginals: np.ndarray,
+    source_vertex: np.ndarray,
+    target_vertex: np.ndarray,
+    near: float = 0.10,
+) -> PartialScores:
+    """Limb hit and peak masses of marginals on a shape whose symmetry is partial.
+
+    Parameters
+    ----------
+    vertices, faces : (N, 3) float, (F, 3) int
+        The shape (any units; distances are taken in units of sqrt(area)).
+    labels : (N,) int
+        Part label of every vertex, 0 off the symmetric parts.
+    symmetry : (N,) int
+        True image of every vertex on a labelled part (other entries are unused).
+    marginals : (S, T) array
+    source_vertex, target_vertex : (S,), (T,) int
+        Vertex of each source and target sample.
+    near : float
+        Radius of a hit and of a peak, in units of sqrt(area).
+    """
+    shape = mesh.Shape(np.asarray(vertices, dtype=np.float64), np.asarray(faces))
+    graph = geodesics.surface_graph(shape.vertices / np.sqrt(mesh.surface_area(shape)), shape.faces)
+    labels, sv, tv = np.asarray(labels), np.asarray(source_vertex), np.asarray(target_vertex)
+    d_s = geodesics.distances_from(graph, sv)[:, tv]
+    d_limb = dijkstra(graph, indices=np.flatnonzero(labels > 0), min_only=True)
+    on, off = labels[sv] > 0, (labels[sv] == 0) & (d_limb[sv] > near)
+    marg = np.asarray(marginals, dtype=np.float64)
+    marg = marg / marg.sum(axis=1, keepdims=True)
+    best = np.where(d_s > near, marg, -1.0).argmax(axis=1)
+    d_image = geodesics.distances_from(graph, np.asarray(symmetry)[sv[on]])[:, tv]
+    hit = d_image[np.arange(on.sum()), best[on]] <= near
+    mass = np.sum(marg * (geodesics.distances_from(graph, tv[best])[:, tv] <= near), axis=1)
+    return PartialScores(float(hit.mean()) if len(hit) else np.nan, mass[on], mass[off])
 
 
 def marginal_scores(

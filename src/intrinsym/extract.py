@@ -600,17 +600,38 @@ def is_identity(
     return _find(targets.indptr, targets.indices, targets.dist, self_target[source], target, radius) <= radius
 
 
+def consistency(image: np.ndarray, graph: SourceGraph, targets: SparseDistances, tolerance: float) -> float:
+    """Share of the source edges inside a map whose geodesic length the map keeps.
+
+    Parameters
+    ----------
+    image : (S,) int64
+        Target sample of each source sample, -1 where unmapped.
+    graph : SourceGraph
+    targets : SparseDistances
+        Target-target geodesics; a pair beyond their radius counts as not kept.
+    tolerance : float
+        An edge (u, v) of length l is kept when |d(image[u], image[v]) - l| < tolerance
+        (length units of ``graph`` and ``targets``).
+
+    Returns
+    -------
+    float in [0, 1]; 1 when no edge has both ends mapped.
+    """
+    image = np.asarray(image, dtype=np.int64)
+    t = targets
+    good, bad = _edge_agreement(image, image, True, graph.ptr, graph.neighbour, graph.length,
+                                t.indptr, t.indices, t.dist, tolerance, 0.0)
+    return good / (good + bad) if good + bad else 1.0
+
+
 def _make(image: np.ndarray, norm: np.ndarray, graph: SourceGraph, targets: SparseDistances,
           p: ExtractParams, kind: str) -> Symmetry:
     """A Symmetry with its score and consistency from a map (S,) int64."""
     src = np.flatnonzero(image >= 0)
-    tgt = image[src]
-    t = targets
-    good, bad = _edge_agreement(image, image, True, graph.ptr, graph.neighbour, graph.length,
-                                t.indptr, t.indices, t.dist, p.d_error, p.peak_radius)
-    consistency = good / (good + bad) if good + bad else 1.0
-    score = float(norm[src, tgt].sum()) / norm.shape[0] * consistency
-    return Symmetry(src, tgt, score, consistency, kind)
+    kept = consistency(image, graph, targets, p.d_error)
+    score = float(norm[src, image[src]].sum()) / norm.shape[0] * kept
+    return Symmetry(src, image[src], score, kept, kind)
 
 
 def query(

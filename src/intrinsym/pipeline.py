@@ -35,14 +35,20 @@ PRESETS: dict[str, dict[str, Any]] = {
     # unstated units; read as a ring half a target spacing wide, it reproduces the
     # paper's behaviour (BP converging in a handful of iterations, sharpening the unary
     # rather than smearing it); 1.5 spacings measured a far weaker model on TOSCA cat0.
+    # With remove_trivial=True on top, the identity is removed outright (no "auto" test).
     "paper": dict(rho=0.4, gamma=0.01, schedule="serial", iterations=100, remove_trivial=False, tolerance=0.5,
-                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0, zoomout=False, passes=1),
+                  unary="spin", potential="paper", unary_seeds=False, vertex_fit=0.0, zoomout=False, passes=1,
+                  trivial_weight=0.0),
 }
 
 #: Smallest fraction of the global symmetry's sample pairs that the seeded ZoomOut map
 #: must keep (:func:`intrinsym.extract.agreement`), else the extraction's map stays: a
 #: guard against ZoomOut drifting to another symmetry (measured on TOSCA / KIDS: 0.94-1.00).
 ZOOMOUT_AGREEMENT = 0.5
+#: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity (the
+#: generated partial shape, 250 / 4000, seeds 0-2: off-limb peak mass median 0.07-0.08
+#: and limb mirror hit 0.95-1.00 at 0.7; 0.3 left the body's invented self-map).
+NO_PARTNER_WEIGHT = 0.7
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
 #: Similarity-to-potential maps: Eq. 5 with gamma, or calibrated Gaussians.
@@ -104,14 +110,21 @@ class Params:
         Weaken the trivial match, the targets within ``trivial_radius`` of the source
         sample (self-matching only; :func:`intrinsym.model.suppress_trivial`).
     trivial_radius : float
-    trivial_weight : float
+    trivial_weight : float or "auto"
         The trivial match's largest unary as a fraction of the row's largest beyond
-        ``trivial_radius``, in [0, 1); 0 (default) removes it. Above 0 the identity
-        stays in the model as the answer "no symmetric partner", so points without one
-        keep their mass at home instead of on a self-map that BP invents (beyond the
-        paper). For shapes whose symmetries are only partial: 0.7 cleared the generated
-        partial shape's body, but on a posed human with a weak unary (TOSCA victoria1)
-        0.5 already let the identity take the torso (BP mirror hit 0.99 -> 0.81).
+        ``trivial_radius``, in [0, 1); 0 removes it. Above 0 the identity stays in the
+        model as the answer "no symmetric partner", so points without one keep their
+        mass at home instead of on a self-map that BP invents (beyond the paper): 0.7
+        cleared the generated partial shape's body, but on a posed human with a weak
+        unary (TOSCA victoria1) 0.5 already let the identity take the torso (BP mirror
+        hit 0.99 -> 0.81). "auto" (default): 0, unless the argmax of BP's marginals
+        keeps fewer than ``isometry_threshold`` of the source edges' lengths within
+        ``d_error`` or one target spacing, the larger (no global near-isometry: the
+        shape's symmetries are partial at most); then BP runs again at
+        :data:`NO_PARTNER_WEIGHT`. Below about 100 / 1000 samples the test separates
+        little: the targets are too coarse to tell a rough self-map from a true one.
+    isometry_threshold : float
+        The share of kept edge lengths below which "auto" keeps the identity, in [0, 1].
     passes : int or None
         BP passes; None: 1 when self-matching (the trivial-match removal already takes
         out the identity's mode), 2 when matching two shapes (identity and swap).
@@ -194,7 +207,8 @@ class Params:
     backend: str = "auto"
     remove_trivial: bool = True
     trivial_radius: float = 0.08
-    trivial_weight: float = 0.0
+    trivial_weight: float | str = "auto"
+    isometry_threshold: float = 0.85
     passes: int | None = None
     pass_radius: float = 0.08
     seed: int = 0
@@ -232,7 +246,10 @@ class Params:
             (not 0 <= self.damping < 1, "damping must lie in [0, 1)"),
             (self.backend not in bp.BACKENDS, f"backend must be one of {bp.BACKENDS}"),
             (self.trivial_radius < 0, "trivial_radius must be non-negative"),
-            (not 0 <= self.trivial_weight < 1, "trivial_weight must lie in [0, 1)"),
+            (self.trivial_weight != "auto" and not (isinstance(self.trivial_weight, (int, float))
+                                                    and 0 <= self.trivial_weight < 1),
+             "trivial_weight must be 'auto' or lie in [0, 1)"),
+            (not 0 <= self.isometry_threshold <= 1, "isometry_threshold must lie in [0, 1]"),
             (self.passes is not None and self.passes < 1, "passes must be at least 1"),
             (self.pass_radius <= 0, "pass_radius must be positive"),
             (self.dtype not in ("float32", "float64"), "dtype must be float32 or float64"),
@@ -713,29 +730,48 @@ def _solve(
     near = _near_targets(src, ps, pt, reach) if self_match and reach > 0 else None
     unary, floor = _unary(src, tgt, ps, pt, p, spectra, t_spacing, near)
     clock.lap("descriptors")
-    if trivial:
-        unary = model.suppress_trivial(unary, near, p.trivial_radius, floor, p.trivial_weight)
-    unary = unary.astype(np.float32)
-    clock.lap("unary")
+    auto = trivial and p.trivial_weight == "auto"
 
-    mrf = model.MRF(unary, edges, edge_length, targets, lam, p.rho)
+    def weakened(weight: float) -> np.ndarray:
+        return (model.suppress_trivial(unary, near, p.trivial_radius, floor, weight) if trivial else unary
+                ).astype(np.float32)
+
+    mrf = model.MRF(weakened(0.0 if p.trivial_weight == "auto" else p.trivial_weight), edges, edge_length,
+                    targets, lam, p.rho)
+    clock.lap("unary")
 
     def progress(it: int, change: float) -> None:
         if log is not None:
             log(f"bp iteration {it}: max message change {change:.3g}")
 
-    runs = [bp.belief_propagation(
-        mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
-    )]
+    def run_bp() -> bp.BPResult:
+        return bp.belief_propagation(mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type,
+                                     progress, backend=p.backend)
+
+    runs = [run_bp()]
+    identity = {}
+    if auto:
+        # With the identity removed every row puts its mass somewhere, and on a shape
+        # without a global symmetry BP invents a self-map that keeps short distances
+        # only roughly (the generated partial shape: 0.76-0.79 of the edges, seeds 0-4);
+        # a true, posed symmetry's argmax keeps 0.90 (victoria1) to 1.00 (TOSCA, KIDS).
+        kept = extract.consistency(runs[0].marginals.argmax(axis=1),
+                                   extract.SourceGraph.from_edges(edges, edge_length, len(ps)), targets,
+                                   max(p.d_error, t_spacing))
+        identity = {"isometry": kept, "threshold": p.isometry_threshold, "weight": 0.0}
+        if kept < p.isometry_threshold:
+            identity["weight"] = NO_PARTNER_WEIGHT
+            identity["removed_iterations"] = runs[0].iterations
+            mrf = dataclasses.replace(mrf, unary=weakened(NO_PARTNER_WEIGHT))
+            runs = [run_bp()]
+    unary = mrf.unary
     marginals = [runs[0].marginals.astype(np.float32)]
     passes = []
     for _ in range(1, n_passes):
         # Result.passes derives these unaries again from the stored marginals
         mrf = dataclasses.replace(mrf, unary=model.suppress_peaks(mrf.unary, marginals[-1], targets,
                                                                   p.pass_radius, floor))
-        runs.append(bp.belief_propagation(
-            mrf, p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, dtype.type, progress, backend=p.backend
-        ))
+        runs.append(run_bp())
         marginals.append(runs[-1].marginals.astype(np.float32))
         passes.append((marginals[-1], mrf.unary))
     res = runs[0]
@@ -794,6 +830,7 @@ def _solve(
                        for run in runs[1:]],
         },
         **zoomout,
+        **({"identity": identity} if identity else {}),
         "versions": _versions(),
     }
     return Result(
