@@ -11,16 +11,15 @@ shapes of :mod:`intrinsym.shapes` and checks the issue's acceptance criteria:
    extracted symmetry that carries at least half of the arm's source samples there;
 3. the paper's segmentation score of the extracted symmetry that best realises one of
    the shape's ground-truth maps is at least 0.90 for every labelled part (and, for the
-   cuboctahedron, how many of its 47 maps are realised that well).
+   cuboctahedron, how many of its 47 maps are realised that well);
+4. the partial shape (two identical limbs on an asymmetric body, issue 3), at the
+   library's default sizes on three seeds: the limb points' marginals peak on the other
+   limb, the off-limb points' on nothing (median peak mass,
+   :func:`intrinsym.evaluate.partial_scores`), and no global symmetry is extracted.
 
 The symmetric shapes run several BP passes (``PASSES``; each further pass finds
 another mode of the posterior, see ``intrinsym.Params.passes``), the others the
 library's default.
-
-4. the partial shape (two identical limbs on an asymmetric body, issue 3), at the
-   library's default sizes on three seeds: the limb points' marginals peak on the other
-   limb, the off-limb points' on nothing (median peak mass, :func:`intrinsym.evaluate.partial_scores`),
-   and no global symmetry is extracted.
 
 It also matches Sumner's horse-01 to horse-03 (``../shared/data/sumner_horse``, skipped
 when absent) and asks whether both the identity and the left/right swap are among the
@@ -63,7 +62,7 @@ SEGMENTATION = 0.9
 SIZES = {"full": (150, 1500), "quick": (60, 600)}
 #: The partial shape runs at the library's default sizes (issue 3 is judged there), and
 #: on several seeds.
-PARTIAL_SIZES = {"full": (250, 4000), "quick": (150, 2000)}
+PARTIAL_SIZES = {SIZES["full"]: (250, 4000), SIZES["quick"]: (150, 2000)}
 PARTIAL_SEEDS = (0, 1, 2)
 #: Partial shape: smallest limb mirror hit, and largest median peak mass off the limbs.
 LIMB_HIT = 0.9
@@ -289,7 +288,7 @@ def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, over
     """Issue 3's partial symmetry: limb points peak on the other limb, off-limb points
     on nothing (no invented self-map of the body, no global symmetry extracted)."""
     shape = shapes.partial()
-    n_source, n_target = PARTIAL_SIZES["quick" if sizes == SIZES["quick"] else "full"]
+    n_source, n_target = PARTIAL_SIZES[sizes]
     for seed in PARTIAL_SEEDS:
         name = f"partial s{seed}"
         result, seconds = cached(cache, f"partial-{seed}", lambda: intrinsym.detect(

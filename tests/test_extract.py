@@ -20,6 +20,7 @@ from intrinsym.extract import (
     _merge,
     agreement,
     complete,
+    consistency,
     extract,
     fitted_vertex_map,
     grow,
@@ -70,6 +71,21 @@ def test_source_graph_csr():
     assert GRAPH.ptr.tolist() == [2 * i for i in range(S + 1)]
     assert sorted(GRAPH.neighbour[GRAPH.ptr[0] : GRAPH.ptr[1]].tolist()) == [1, 9]
     assert np.all(GRAPH.length == 0.1)
+
+
+def test_consistency_counts_the_edges_a_map_keeps():
+    assert consistency(IDENTITY, GRAPH, TARGETS, 0.02) == 1.0 and consistency(MIRROR, GRAPH, TARGETS, 0.02) == 1.0
+    # sample 3 one target along: its two edges become 0.125 and 0.075 long
+    moved = IDENTITY.copy()
+    moved[3] += 1
+    assert consistency(moved, GRAPH, TARGETS, 0.02) == 0.8 and consistency(moved, GRAPH, TARGETS, 0.03) == 1.0
+    # an unmapped sample's edges do not count
+    moved[3] = -1
+    assert consistency(moved, GRAPH, TARGETS, 0.02) == 1.0
+    # identity on one half, mirror on the other: the two seams are 0.2 long
+    fold = np.where(np.arange(S) < 5, IDENTITY, MIRROR)
+    assert consistency(fold, GRAPH, TARGETS, 0.05) == 0.8
+    assert consistency(np.full(S, -1), GRAPH, TARGETS, 0.02) == 1.0
 
 
 def test_peaks_threshold_and_suppression():
