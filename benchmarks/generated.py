@@ -117,7 +117,7 @@ def cached(cache: Path | None, name: str, run) -> tuple[intrinsym.Result, float]
         result = intrinsym.Result.load(folder)
         result.extraction = extract.from_result(result.marginals, result.edges, result.support,
                                                 result.source_points, result.target_points,
-                                                result.params.extraction(), unary=result.unary,
+                                                result.extraction_params(), unary=result.unary,
                                                 passes=result.passes)
     else:
         result = run()
@@ -145,7 +145,7 @@ def corner_recovery(result: intrinsym.Result, shape: shapes.GeneratedShape) -> t
     v = shape.vertices
     corners = np.flatnonzero(np.isclose(np.sort(np.abs(v), axis=1), [0.0, 1.0, 1.0]).all(axis=1))
     dist = geodesics.distances_from(geodesic_graph(v, shape.faces), corners)
-    params = result.params.extraction()
+    params = result.extraction_params()
     passes = result.passes
     found_peaks, found_parts = [], []
     for i in range(len(corners)):
@@ -186,7 +186,7 @@ def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
     ``symmetry_map.npy`` is made, in two-shape mode from ``source`` into ``target``), the
     others by :func:`intrinsym.extract.fitted_vertex_map`.
     """
-    params = result.params.extraction()
+    params = result.extraction_params()
     evecs = descriptors.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
     other = {} if source is target else dict(
         target_vertices=target.vertices,

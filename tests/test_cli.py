@@ -34,7 +34,7 @@ def test_detect_trivial_weight(tmp_path):
     out = tmp_path / "spot"
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
     run_json = json.loads((out / "run.json").read_text())
-    assert run_json["params"]["trivial_weight"] == 0.5 and "identity" not in run_json
+    assert run_json["params"]["trivial_weight"] == 0.5 and run_json["identity"] == {"weight": 0.5}
     # auto: a threshold no BP argmax reaches keeps the identity at the fallback weight
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "auto",
                      "--isometry-threshold", "1.0"]) == 0

@@ -222,6 +222,22 @@ def test_a_map_grown_where_the_marginals_hold_no_peak_is_not_global():
     assert result.global_index == 0 and result.symmetries[0].kind == "global"
 
 
+def test_the_unary_does_not_grow_where_the_marginals_say_no_partner():
+    """Marginals that keep the mirror on samples 0-2 and the identity elsewhere (the
+    trivial match kept at a weight: "no partner"), a unary with a full rotation: the
+    rotation grown from the unary's seeds stays on 0-2 with ``no_partner``."""
+    m = np.full((S, T), 0.01)
+    m[np.arange(S), IDENTITY] = 1.0
+    m[:3, IDENTITY[:3]] = 0.3
+    m[np.arange(3), MIRROR[:3]] = 1.0
+    u = marginals(mirror=ROTATION)
+    found = {}
+    for flag in (False, True):
+        result = extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01, no_partner=flag), self_target=SELF, unary=u)
+        found[flag] = [s.source.tolist() for s in result.symmetries if s.target.tolist() == ROTATION[s.source].tolist()]
+    assert found == {False: [list(range(S))], True: [[0, 1, 2]]}
+
+
 def test_later_passes_add_their_modes_scored_on_their_own_marginals():
     """Pass 1 kept the mirror, pass 2 (mirror removed) the rotation: both are extracted,
     each scored on its own pass; the unary of pass 2 seeds what neither pass kept."""

@@ -423,8 +423,8 @@ def _query(args: argparse.Namespace, result: pipeline.Result, out: Path) -> int:
     p = dataclasses.replace(result.params, **{k: v for k, v in (("peak_threshold", args.peak_threshold),
                                                                 ("d_error", args.d_error)) if v is not None})
     found = extract.from_result(result.marginals, result.edges, result.support, result.source_points,
-                                result.target_points, p.extraction(), source=sample, unary=result.unary,
-                                passes=result.passes)
+                                result.target_points, dataclasses.replace(result, params=p).extraction_params(),
+                                source=sample, unary=result.unary, passes=result.passes)
     listed = extract.records(found, result.source_vertex, result.target_vertex, result.support)
     for record, sym in zip(listed, found):
         record["image_vertex"] = int(result.target_vertex[sym.target[np.searchsorted(sym.source, sample)]])

@@ -142,11 +142,15 @@ class PartialScores:
         Peak mass of each source sample on a labelled part, and of each one farther
         than ``near`` from every labelled part (the body around a part's base is
         locally symmetric too, so it is scored as neither).
+    on, off : (S,) bool
+        Which source samples those are.
     """
 
     limb_hit: float
     limb_mass: np.ndarray
     off_mass: np.ndarray
+    on: np.ndarray
+    off: np.ndarray
 
 
 def partial_scores(
@@ -187,7 +191,7 @@ def partial_scores(
     d_image = geodesics.distances_from(graph, np.asarray(symmetry)[sv[on]])[:, tv]
     hit = d_image[np.arange(on.sum()), best[on]] <= near
     mass = np.sum(marg * (geodesics.distances_from(graph, tv[best])[:, tv] <= near), axis=1)
-    return PartialScores(float(hit.mean()) if len(hit) else np.nan, mass[on], mass[off])
+    return PartialScores(float(hit.mean()) if len(hit) else np.nan, mass[on], mass[off], on, off)
 
 
 def marginal_scores(

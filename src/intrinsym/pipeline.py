@@ -283,10 +283,11 @@ class Params:
         """The descriptor terms of ``unary``."""
         return self.unary.split("*")
 
-    def extraction(self) -> extract.ExtractParams:
-        """The symmetry-extraction parameters."""
+    def extraction(self, no_partner: bool = False) -> extract.ExtractParams:
+        """The symmetry-extraction parameters; ``no_partner``: the trivial match was kept
+        at a weight (:attr:`Result.extraction_params` knows whether it was)."""
         return extract.ExtractParams(threshold=self.peak_threshold, d_error=self.d_error, unary_seeds=self.unary_seeds,
-                                     vertex_fit=self.vertex_fit)
+                                     vertex_fit=self.vertex_fit, no_partner=no_partner)
 
 
 def make_params(preset: str = "default", **overrides: Any) -> Params:
@@ -586,6 +587,11 @@ class Result:
 
     ARRAYS = ("source_points", "target_points", "source_vertex", "target_vertex", "edges", "unary", "marginals")
 
+    def extraction_params(self) -> extract.ExtractParams:
+        """The extraction parameters this result was extracted with (``no_partner`` from
+        the trivial weight BP used, ``info["identity"]``)."""
+        return self.params.extraction(no_partner=self.info.get("identity", {}).get("weight", 0.0) > 0)
+
     @property
     def passes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """(marginals, unary) of every BP pass after the first, as the extraction takes
@@ -749,7 +755,7 @@ def _solve(
                                      progress, backend=p.backend)
 
     runs = [run_bp()]
-    identity = {}
+    identity = {"weight": float(p.trivial_weight)} if trivial and not auto else {}
     if auto:
         # With the identity removed every row puts its mass somewhere, and on a shape
         # without a global symmetry BP invents a self-map that keeps short distances
@@ -786,7 +792,8 @@ def _solve(
         target_vertices=tgt.input_vertices,
     )
     extraction = extract.from_result(
-        marginals[0], edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt], p.extraction(), unary=unary,
+        marginals[0], edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt],
+        p.extraction(no_partner=identity.get("weight", 0.0) > 0), unary=unary,
         passes=passes,
     )
     clock.lap("extract")
