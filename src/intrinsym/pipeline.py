@@ -290,6 +290,12 @@ class Params:
                                      vertex_fit=self.vertex_fit, no_partner=no_partner)
 
 
+def _extraction_params(p: Params, identity: dict) -> extract.ExtractParams:
+    """``p.extraction()``, with ``no_partner`` when BP kept the trivial match at a weight
+    (``identity``: ``run.json``'s record of it, empty when there was none)."""
+    return p.extraction(no_partner=identity.get("weight", 0.0) > 0)
+
+
 def make_params(preset: str = "default", **overrides: Any) -> Params:
     """Parameters of a named preset ("default" or "paper") with overrides applied."""
     if preset not in PRESETS:
@@ -590,7 +596,7 @@ class Result:
     def extraction_params(self) -> extract.ExtractParams:
         """The extraction parameters this result was extracted with (``no_partner`` from
         the trivial weight BP used, ``info["identity"]``)."""
-        return self.params.extraction(no_partner=self.info.get("identity", {}).get("weight", 0.0) > 0)
+        return _extraction_params(self.params, self.info.get("identity", {}))
 
     @property
     def passes(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -736,14 +742,14 @@ def _solve(
     near = _near_targets(src, ps, pt, reach) if self_match and reach > 0 else None
     unary, floor = _unary(src, tgt, ps, pt, p, spectra, t_spacing, near)
     clock.lap("descriptors")
-    auto = trivial and p.trivial_weight == "auto"
+    auto = p.trivial_weight == "auto"
+    weight = 0.0 if auto else p.trivial_weight
 
     def weakened(weight: float) -> np.ndarray:
         return (model.suppress_trivial(unary, near, p.trivial_radius, floor, weight) if trivial else unary
                 ).astype(np.float32)
 
-    mrf = model.MRF(weakened(0.0 if p.trivial_weight == "auto" else p.trivial_weight), edges, edge_length,
-                    targets, lam, p.rho)
+    mrf = model.MRF(weakened(weight), edges, edge_length, targets, lam, p.rho)
     clock.lap("unary")
 
     def progress(it: int, change: float) -> None:
@@ -755,8 +761,8 @@ def _solve(
                                      progress, backend=p.backend)
 
     runs = [run_bp()]
-    identity = {"weight": float(p.trivial_weight)} if trivial and not auto else {}
-    if auto:
+    identity = {"weight": float(weight)} if trivial else {}
+    if trivial and auto:
         # With the identity removed every row puts its mass somewhere, and on a shape
         # without a global symmetry BP invents a self-map that keeps short distances
         # only roughly (the generated partial shape: 0.76-0.79 of the edges, seeds 0-4);
@@ -764,7 +770,7 @@ def _solve(
         kept = extract.consistency(runs[0].marginals.argmax(axis=1),
                                    extract.SourceGraph.from_edges(edges, edge_length, len(ps)), targets,
                                    max(p.d_error, t_spacing))
-        identity = {"isometry": kept, "threshold": p.isometry_threshold, "weight": 0.0}
+        identity |= {"isometry": kept, "threshold": p.isometry_threshold}
         if kept < p.isometry_threshold:
             identity["weight"] = NO_PARTNER_WEIGHT
             identity["removed_iterations"] = runs[0].iterations
@@ -793,7 +799,7 @@ def _solve(
     )
     extraction = extract.from_result(
         marginals[0], edges, support, src.shape.vertices[ps], tgt.shape.vertices[pt],
-        p.extraction(no_partner=identity.get("weight", 0.0) > 0), unary=unary,
+        _extraction_params(p, identity), unary=unary,
         passes=passes,
     )
     clock.lap("extract")
