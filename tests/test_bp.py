@@ -257,24 +257,27 @@ def test_weight_polynomial_matches_exp(rho, tol):
 
 def test_backend_choice():
     assert resolve_backend("cpu", "serial") == "cpu"
-    assert resolve_backend("auto", "serial") == "cpu"
     with pytest.raises(ValueError, match="backend"):
         resolve_backend("tpu", "serial")
+    assert resolve_backend("auto", "residual") == "cpu"
+    assert resolve_backend("auto", "colour", np.float64) == "cpu"
     if bp_gpu.available():
-        assert resolve_backend("auto", "flooding") == "gpu"
-        with pytest.raises(ValueError, match="flooding"):
-            resolve_backend("gpu", "serial")
+        assert resolve_backend("auto", "colour") == "gpu"
+        assert resolve_backend("auto", "serial") == "gpu"
+        with pytest.raises(ValueError, match="residual"):
+            resolve_backend("gpu", "residual")
     else:
-        assert resolve_backend("auto", "flooding") == "cpu"
+        assert resolve_backend("auto", "colour") == "cpu"
         with pytest.raises(ValueError, match="CuPy"):
             resolve_backend("gpu", "flooding")
 
 
 @pytest.mark.skipif(not bp_gpu.available(), reason="needs CuPy and a CUDA device")
-@pytest.mark.parametrize("damping", [0.0, 0.3])
-def test_gpu_equals_cpu_flooding(damping):
+@pytest.mark.parametrize("schedule, damping", [("flooding", 0.0), ("flooding", 0.3), ("colour", 0.0),
+                                               ("colour", 0.3), ("serial", 0.0)])
+def test_gpu_equals_cpu(schedule, damping):
     mrf, _ = sphere_problem(40, 2000, 4, seed=8)
-    kw = dict(schedule="flooding", iterations=8, tol=0.0, damping=damping)
+    kw = dict(schedule=schedule, iterations=8, tol=0.0, damping=damping, seed=3)
     cpu = belief_propagation(mrf, dtype=np.float64, backend="cpu", **kw)
     gpu = belief_propagation(mrf, backend="gpu", **kw)
     assert gpu.iterations == cpu.iterations

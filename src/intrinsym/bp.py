@@ -32,6 +32,8 @@ from .model import MRF, pairwise_dense
 
 SCHEDULES = ("serial", "colour", "residual", "flooding")
 BACKENDS = ("auto", "cpu", "gpu")
+#: Schedules the GPU backend runs ("residual" decides at run time which nodes send).
+GPU_SCHEDULES = ("serial", "colour", "flooding")
 
 # Highest degree of the polynomial that replaces exp in psi - rho^2 (see weight_polynomial).
 MAX_WEIGHT_DEGREE = 15
@@ -430,12 +432,13 @@ def _check(mrf_unary: np.ndarray, schedule: str, iterations: int, damping: float
         raise ValueError("unary potentials must be finite and positive")
 
 
-def resolve_backend(backend: str, schedule: str) -> str:
+def resolve_backend(backend: str, schedule: str, dtype: type = np.float32) -> str:
     """The backend that runs: "cpu" or "gpu".
 
-    "auto" picks the GPU when CuPy sees a CUDA device and the schedule is "flooding"
-    (the only one the GPU backend runs), else the CPU. "gpu" without a usable GPU or
-    with the serial schedule is an error.
+    "auto" picks the GPU when CuPy sees a CUDA device, the schedule is one of
+    :data:`GPU_SCHEDULES` and the messages are stored in float32 (the GPU backend's
+    precision), else the CPU. "gpu" without a usable GPU or with the residual schedule
+    is an error.
     """
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; expected one of {BACKENDS}")
@@ -447,10 +450,10 @@ def resolve_backend(backend: str, schedule: str) -> str:
     if backend == "gpu":
         if not usable:
             raise ValueError("backend 'gpu' needs CuPy and a CUDA device (pip install intrinsym[gpu])")
-        if schedule != "flooding":
-            raise ValueError("the GPU backend runs the flooding schedule only")
+        if schedule not in GPU_SCHEDULES:
+            raise ValueError(f"the GPU backend runs the schedules {', '.join(GPU_SCHEDULES)}, not {schedule!r}")
         return "gpu"
-    return "gpu" if usable and schedule == "flooding" else "cpu"
+    return "gpu" if usable and schedule in GPU_SCHEDULES and np.dtype(dtype) == np.float32 else "cpu"
 
 
 def iterate(
@@ -663,10 +666,10 @@ def belief_propagation(
     """
     started = time.perf_counter()
     _check(mrf.unary, schedule, iterations, damping)
-    if resolve_backend(backend, schedule) == "gpu":
+    if resolve_backend(backend, schedule, dtype) == "gpu":
         from . import bp_gpu
 
-        return bp_gpu.belief_propagation_gpu(mrf, iterations, tol, damping, progress)
+        return bp_gpu.belief_propagation_gpu(mrf, schedule, iterations, tol, damping, seed, progress)
     sweep = sparse_sweep(mrf, dtype, damping)
     return _run(mrf.unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress, started)
 

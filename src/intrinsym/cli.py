@@ -48,7 +48,7 @@ MODEL_OPTIONS = [
     ("--iterations", "iterations", int, f"maximum BP iterations T (default and paper: {D.iterations})"),
     ("--bp-tol", "bp_tol", float, f"stop BP when the largest message change is below this (default {D.bp_tol})"),
     ("--damping", "damping", float, f"message damping in [0, 1) (default {D.damping})"),
-    ("--backend", "backend", str, f"where BP runs: auto (GPU if CuPy sees one and --schedule flooding), cpu or gpu (default {D.backend})"),
+    ("--backend", "backend", str, f"where BP runs: auto (GPU if CuPy sees one, unless --schedule residual or --dtype float64), cpu or gpu (default {D.backend})"),
     ("--trivial-radius", "trivial_radius", float, f"radius of the trivial match, units of sqrt(area) (default {D.trivial_radius})"),
     ("--trivial-weight", "trivial_weight", _weight,
      "the trivial match's largest unary as a fraction of the row's largest elsewhere, in [0, 1); 0 removes it, "

@@ -105,7 +105,8 @@ class Params:
         Message damping in [0, 1).
     backend : {"auto", "cpu", "gpu"}
         Where BP runs (:func:`intrinsym.bp.resolve_backend`): "auto" is the GPU when
-        CuPy sees a CUDA device and the schedule is flooding, else the CPU.
+        CuPy sees a CUDA device, the schedule is not "residual" and ``dtype`` is
+        float32, else the CPU.
     remove_trivial : bool
         Weaken the trivial match, the targets within ``trivial_radius`` of the source
         sample (self-matching only; :func:`intrinsym.model.suppress_trivial`).
