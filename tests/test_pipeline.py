@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 import intrinsym
-from intrinsym import extract, pipeline
+from intrinsym import bp_gpu, extract, pipeline
 from intrinsym.mesh import Shape
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
@@ -46,6 +46,7 @@ def test_result_contract(spot, spot_result, tmp_path):
     for key in ("params", "sizes", "seconds", "bp", "versions", "resolved"):
         assert key in run
     assert run["bp"]["iterations"] >= 1 and isinstance(run["bp"]["converged"], bool)
+    assert run["bp"]["backend"] == ("gpu" if bp_gpu.available() else "cpu")
     assert run["params"]["n_source"] == s
     again = intrinsym.Result.load(out)
     assert np.array_equal(again.marginals, r.marginals)

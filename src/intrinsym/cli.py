@@ -222,7 +222,7 @@ def _summary(result: pipeline.Result, out: Path) -> dict:
         "mode": info["mode"],
         "sizes": info["sizes"],
         "seconds": {k: round(v, 3) for k, v in info["seconds"].items()},
-        "bp": {k: info["bp"][k] for k in ("iterations", "converged", "max_change")},
+        "bp": {k: info["bp"][k] for k in ("backend", "iterations", "converged", "max_change")},
         "files": ["result.npz", "run.json"] + (["symmetries.json", "symmetry_map.npy"] if result.extraction else []),
     }
 
@@ -233,7 +233,8 @@ def _print_summary(s: dict) -> None:
     print("seconds: " + ", ".join(f"{k} {v:.2f}" for k, v in s["seconds"].items()))
     b = s["bp"]
     state = "converged" if b["converged"] else "not converged"
-    print(f"bp: {b['iterations']} iterations, {state}, max message change {b['max_change']:.2e}")
+    print(f"bp: {b['iterations']} iterations on the {b['backend'].upper()}, {state}, "
+          f"max message change {b['max_change']:.2e}")
     if "symmetries" in s:
         print(f"symmetries: {s['symmetries']} found (symmetries.json)")
     print(f"wrote {', '.join(s['files'])} to {s['out']}")

@@ -833,6 +833,7 @@ def _solve(
         },
         "seconds": clock.seconds,
         "bp": {
+            "backend": bp.resolve_backend(p.backend, p.schedule, dtype.type),
             "iterations": res.iterations,
             "converged": res.converged,
             "max_change": res.max_change,
