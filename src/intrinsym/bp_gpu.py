@@ -128,7 +128,7 @@ def belief_propagation_gpu(
 
     def update(it: int) -> float:
         steps = fixed if fixed is not None else batches(schedule_steps(schedule, orders[it], edges, ptr, directed))
-        return max(send(*batch) for batch in steps)
+        return max((send(*batch) for batch in steps), default=0.0)
 
     setup = time.perf_counter() - started
     history, seconds, converged = iterate(update, iterations, tol, progress)
