@@ -102,3 +102,20 @@ def test_help_documents_every_option():
         assert flag in text
     for flag in ("--preset", "--remove-trivial", "--keep-trivial", "--example", "--quiet", "--json"):
         assert flag in text
+
+
+def test_detect_report_identity(tmp_path):
+    out = tmp_path / "spot"
+    sizes = ["--source", "60", "--target", "600", "--spin-cloud", "5000"]
+    # the identity stays in the model (as in the paper), so the extraction grows it
+    assert cli.main(["detect", "--example", "-o", str(out), "-q", *sizes, "--keep-trivial", "--report-identity"]) == 0
+    identity = [sym for sym in json.loads((out / "symmetries.json").read_text()) if sym["kind"] == "identity"]
+    assert len(identity) == 1 and len(identity[0]["pairs"]) >= 30
+    spot = intrinsym.load(intrinsym.example_path())
+    pairs = np.array(identity[0]["pairs"])
+    gap = np.linalg.norm(spot.vertices[pairs[:, 0]] - spot.vertices[pairs[:, 1]], axis=1)
+    assert np.median(gap) < 0.05 * np.sqrt(intrinsym.mesh.surface_area(spot))
+    assert json.loads((out / "run.json").read_text())["params"]["report_identity"] is True
+    # without the flag the same model lists no identity
+    assert cli.main(["detect", "--example", "-o", str(out), "-q", *sizes, "--keep-trivial"]) == 0
+    assert all(sym["kind"] != "identity" for sym in json.loads((out / "symmetries.json").read_text()))

@@ -104,6 +104,10 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
                        help="weaken the trivial match to --trivial-weight (default, except with --preset paper)")
         g.add_argument("--keep-trivial", dest="remove_trivial", action="store_false",
                        help="keep the trivial (identity) match in the model, as the paper does")
+    if self_match:
+        p.add_argument("--report-identity", dest="report_identity", action="store_true", default=None,
+                       help="extraction: also list the identity symmetries (kind 'identity') in symmetries.json; "
+                            "they arise where the trivial match stays in the model (--keep-trivial)")
     p.add_argument("--unary-seeds", dest="unary_seeds", action=argparse.BooleanOptionalAction, default=None,
                    help="extraction: also grow symmetries from the unary's peaks (default on; off with --preset paper)")
     if self_match:
@@ -211,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _overrides(args: argparse.Namespace) -> dict:
-    names = [dest for _, dest, _, _ in MODEL_OPTIONS] + ["remove_trivial", "unary_seeds", "zoomout"]
+    names = [dest for _, dest, _, _ in MODEL_OPTIONS] + ["remove_trivial", "report_identity", "unary_seeds", "zoomout"]
     return {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
 
 

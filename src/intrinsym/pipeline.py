@@ -172,6 +172,10 @@ class Params:
         Symmetry extraction (paper Sec. 5.1): peak threshold t on the max-normalised
         marginal (paper: 0.5-0.75) and geodesic error bound of the region growing
         (paper: 0.001-0.15); see :class:`intrinsym.extract.ExtractParams`.
+    report_identity : bool
+        Also list the identity symmetries (kind "identity") among the extracted ones
+        (``symmetries.json``). They arise where the trivial match stays in the model
+        (``remove_trivial`` off, as in the paper, or a ``trivial_weight`` above 0).
     unary_seeds : bool
         Also grow symmetries from the peaks of the unary, not only of the marginals
         (beyond the paper; :func:`intrinsym.extract.extract`).
@@ -223,6 +227,7 @@ class Params:
     unary_floor: float = 1e-3
     peak_threshold: float = extract.ExtractParams.threshold
     d_error: float = extract.ExtractParams.d_error
+    report_identity: bool = False
     unary_seeds: bool = True
     vertex_fit: float = extract.ExtractParams.vertex_fit
     zoomout: bool = True
@@ -288,7 +293,8 @@ class Params:
         """The symmetry-extraction parameters; ``no_partner``: the trivial match was kept
         at a weight (:attr:`Result.extraction_params` knows whether it was)."""
         return extract.ExtractParams(threshold=self.peak_threshold, d_error=self.d_error, unary_seeds=self.unary_seeds,
-                                     vertex_fit=self.vertex_fit, no_partner=no_partner)
+                                     vertex_fit=self.vertex_fit, no_partner=no_partner,
+                                     keep_identity=self.report_identity)
 
 
 def _extraction_params(p: Params, identity: dict) -> extract.ExtractParams:
