@@ -104,7 +104,6 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
                        help="weaken the trivial match to --trivial-weight (default, except with --preset paper)")
         g.add_argument("--keep-trivial", dest="remove_trivial", action="store_false",
                        help="keep the trivial (identity) match in the model, as the paper does")
-    if self_match:
         p.add_argument("--report-identity", dest="report_identity", action="store_true", default=None,
                        help="extraction: also list the identity symmetries (kind 'identity') in symmetries.json; "
                             "they arise where the trivial match stays in the model (--keep-trivial)")
