@@ -36,9 +36,7 @@ MAX_RELATIVE = 1e-3
 def mrf_of(path: Path, n_source: int, n_target: int) -> tuple[model.MRF, dict]:
     """The MRF a default detect run solved (its final unary), and the run's sizes."""
     res = intrinsym.detect(path, n_source=n_source, n_target=n_target, iterations=1, trivial_weight=0.0)
-    mrf = model.MRF(res.unary, res.edges, res.support.edge_length, res.support.targets,
-                    res.info["resolved"]["lambda_normalised"], res.params.rho)
-    return mrf, res.info["sizes"]
+    return res.mrf(), res.info["sizes"]
 
 
 def run_backend(mrf: model.MRF, schedule: str, backend: str) -> bp.BPResult:
@@ -83,12 +81,11 @@ def main(argv: list[str] | None = None) -> int:
             print(json.dumps({"mesh": str(path), "sizes": sizes, "device": device, "backends": row,
                               "gpu_against_cpu": agreement}))
             continue
-        for (schedule, backend), name in zip(runs, row):
-            r = row[name]
-            a = agreement[schedule]
+        for schedule, backend in runs:
+            r, a = row[f"{backend} {schedule}"], agreement[schedule]
             agree = (f"max rel. diff {a['relative_difference']:.1e}, argmax {a['argmax_agreement']:.3f}"
                      if backend == "gpu" else "")
-            print(f"| {path.name} | {sizes['source']} / {sizes['target']} | {sizes['directed_edges']} | {name} | "
+            print(f"| {path.name} | {sizes['source']} / {sizes['target']} | {sizes['directed_edges']} | {backend} {schedule} | "
                   f"{r['seconds_per_iteration']:.4f} | {r['iterations']} | {r['seconds']:.2f} | {agree} |")
     return 1 if failed else 0
 

@@ -44,21 +44,6 @@ def point_mass_messages(mrf: model.MRF, labels: np.ndarray) -> np.ndarray:
     return messages
 
 
-def colour_bp(mrf: model.MRF, messages: np.ndarray, iterations: int, tol: float) -> tuple[np.ndarray, int]:
-    """The colour schedule of :func:`intrinsym.bp.belief_propagation` from given messages."""
-    n_s = mrf.unary.shape[0]
-    ptr, directed = bp.incoming_edges(mrf.edges, n_s)
-    order = bp.visiting_orders("colour", mrf.edges, n_s, 1, 0)[0]
-    steps = bp.schedule_steps("colour", order, mrf.edges, ptr, directed)
-    sweep = bp.sparse_sweep(mrf, np.float32)
-    moved = np.zeros(len(messages))
-    messages = messages.copy()
-    for it in range(1, iterations + 1):
-        if sweep(messages, messages, steps, moved) < tol:
-            break
-    return bp.beliefs(mrf.unary, messages, ptr, directed), it
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", nargs=2, type=int, default=(150, 1500), metavar=("PS", "PT"))
@@ -84,16 +69,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"off-plane source samples ({off_plane.sum()} of {len(a)}) within 0.05 of:")
     print(f"  pass 1 (from uniform messages): {score(res.marginals)}")
     print(f"  pass 2 (from uniform messages): {score(res.pass_marginals[0])}")
-    mrf = model.MRF(res.unary, res.edges, res.support.edge_length, res.support.targets,
-                    res.info["resolved"]["lambda_normalised"], res.params.rho)
+    mrf = res.mrf()
     runs = (("pass 1", res.unary, "identity", a), ("pass 2", res.passes[0][1], "identity", a),
             ("pass 1", res.unary, "swap", swap[a]))
     for name, unary, truth, vertex in runs:
         start = point_mass_messages(mrf, res.support.vertex_target[vertex])
         for k in CHECKPOINTS:
-            beliefs, ran = colour_bp(dataclasses.replace(mrf, unary=unary), start, k, res.params.bp_tol)
-            print(f"  {name} unary, from the true {truth}, {ran} iterations: {score(beliefs)}")
-            if ran < k:
+            run = bp.belief_propagation(dataclasses.replace(mrf, unary=unary), "colour", k, res.params.bp_tol,
+                                        initial=start)
+            print(f"  {name} unary, from the true {truth}, {run.iterations} iterations: {score(run.marginals)}")
+            if run.converged:
                 break
     return 0
 

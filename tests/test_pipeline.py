@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 import intrinsym
-from intrinsym import bp_gpu, extract, pipeline
+from intrinsym import bp, bp_gpu, extract, pipeline
 from intrinsym.mesh import Shape
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
@@ -47,6 +47,10 @@ def test_result_contract(spot, spot_result, tmp_path):
         assert key in run
     assert run["bp"]["iterations"] >= 1 and isinstance(run["bp"]["converged"], bool)
     assert run["bp"]["backend"] == ("gpu" if bp_gpu.available() else "cpu")
+    # the stored MRF gives back the stored marginals
+    p = r.params
+    again_bp = bp.belief_propagation(r.mrf(), p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, backend=p.backend)
+    assert np.abs(again_bp.marginals - r.marginals).max() < 1e-6
     assert run["params"]["n_source"] == s
     again = intrinsym.Result.load(out)
     assert np.array_equal(again.marginals, r.marginals)

@@ -179,12 +179,8 @@ def run_case(case: Case, data_dir: Path | None, iterations: int, n_messages: int
     path = resolve_mesh(case.mesh, data_dir)
     res = pipeline.detect(path, n_source=case.n_source, n_target=case.n_target, iterations=iterations, log=log)
     info = res.info
-    mrf = model.MRF(
-        res.unary, res.edges, res.support.edge_length, res.support.targets,
-        info["resolved"]["lambda_normalised"], res.params.rho,
-    )
     log("timing messages, dense paper form against ours")
-    dense_s, sparse_s, diff = message_timing(mrf, n_messages)
+    dense_s, sparse_s, diff = message_timing(res.mrf(), n_messages)
     b = info["bp"]
     return CaseResult(
         name=case.name,

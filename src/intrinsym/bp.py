@@ -61,6 +61,8 @@ class BPResult:
         Wall time spent before the first iteration (ring bounds, tables, buffers).
     updates : list of int
         Messages computed in every iteration (2E, except in the residual schedule).
+    backend : {"cpu", "gpu"}
+        Where BP ran.
     """
 
     marginals: np.ndarray
@@ -71,6 +73,7 @@ class BPResult:
     seconds: list[float] = field(default_factory=list)
     setup_seconds: float = 0.0
     updates: list[int] = field(default_factory=list)
+    backend: str = "cpu"
 
 
 def incoming_edges(edges: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -511,6 +514,18 @@ def active_steps(steps: Steps, batch: int, active: np.ndarray) -> Steps:
     return Steps(steps.node[k], ptr, out, np.array([0, len(k)], dtype=np.int64))
 
 
+def initial_messages(initial: np.ndarray | None, n_edges: int, n_t: int, dtype: type) -> np.ndarray:
+    """(2E, T) messages BP starts from, in ``dtype``: a copy of ``initial``, or all ones."""
+    if initial is None:
+        return np.ones((2 * n_edges, n_t), dtype=dtype)
+    initial = np.asarray(initial)
+    if initial.shape != (2 * n_edges, n_t):
+        raise ValueError(f"initial messages must have shape {(2 * n_edges, n_t)}, got {initial.shape}")
+    if np.any(~np.isfinite(initial)) or np.any(initial <= 0):
+        raise ValueError("initial messages must be finite and positive")
+    return initial.astype(dtype)
+
+
 def _run(
     unary: np.ndarray,
     edges: np.ndarray,
@@ -522,6 +537,7 @@ def _run(
     sweep: Callable[[np.ndarray, np.ndarray, Steps, np.ndarray], float],
     progress: Callable[[int, float], None] | None,
     started: float,
+    initial: np.ndarray | None = None,
 ) -> BPResult:
     """Iterate ``sweep(read, write, steps, moved)`` to convergence.
 
@@ -532,7 +548,7 @@ def _run(
     """
     n_s, n_t = unary.shape
     ptr, directed = incoming_edges(edges, n_s)
-    messages = np.ones((2 * len(edges), n_t), dtype=dtype)
+    messages = initial_messages(initial, len(edges), n_t, dtype)
     moved = np.zeros(2 * len(edges))
     ends = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     receiver = ends[np.arange(2 * len(ends)) >> 1, 1 - (np.arange(2 * len(ends)) & 1)]  # s of d = q -> s
@@ -627,6 +643,7 @@ def belief_propagation(
     dtype: type = np.float32,
     progress: Callable[[int, float], None] | None = None,
     backend: str = "cpu",
+    initial: np.ndarray | None = None,
 ) -> BPResult:
     """Loopy sum-product BP with the exact sparse ring message.
 
@@ -659,6 +676,9 @@ def belief_propagation(
     backend : {"auto", "cpu", "gpu"}
         See :func:`resolve_backend`. The GPU backend (CuPy, :mod:`intrinsym.bp_gpu`)
         stores float32 messages.
+    initial : (2E, T) array, optional
+        Messages to start from (directed edge d = 2e + k sends from ``edges[e, k]``),
+        finite and positive; default all ones (paper Sec. 4).
 
     Returns
     -------
@@ -669,9 +689,9 @@ def belief_propagation(
     if resolve_backend(backend, schedule, dtype) == "gpu":
         from . import bp_gpu
 
-        return bp_gpu.belief_propagation_gpu(mrf, schedule, iterations, tol, damping, seed, progress)
+        return bp_gpu.belief_propagation_gpu(mrf, schedule, iterations, tol, damping, seed, progress, initial)
     sweep = sparse_sweep(mrf, dtype, damping)
-    return _run(mrf.unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress, started)
+    return _run(mrf.unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress, started, initial)
 
 
 def sparse_sweep(mrf: MRF, dtype: type = np.float32, damping: float = 0.0) -> Callable[[np.ndarray, np.ndarray, Steps], float]:
@@ -739,6 +759,7 @@ def belief_propagation_dense(
     tol: float = 1e-4,
     damping: float = 0.0,
     seed: int = 0,
+    initial: np.ndarray | None = None,
 ) -> BPResult:
     """Paper-literal BP (Eq. 7 with the full |Pt| x |Pt| pairwise table); the oracle.
 
@@ -754,7 +775,7 @@ def belief_propagation_dense(
     edge_length : (E,) float
     target_dist : (T, T) float
         All target-target geodesic distances.
-    lam, rho, schedule, iterations, tol, damping, seed
+    lam, rho, schedule, iterations, tol, damping, seed, initial
         As in :func:`belief_propagation`.
     """
     started = time.perf_counter()
@@ -780,4 +801,4 @@ def belief_propagation_dense(
                 write[out] = new
         return change
 
-    return _run(unary, edges, schedule, iterations, tol, seed, np.float64, sweep, None, started)
+    return _run(unary, edges, schedule, iterations, tol, seed, np.float64, sweep, None, started, initial)

@@ -17,7 +17,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .bp import GPU_SCHEDULES, BPResult, Steps, incoming_edges, iterate, ring_bounds, schedule_steps, visiting_orders
+from .bp import (GPU_SCHEDULES, BPResult, Steps, incoming_edges, initial_messages, iterate, ring_bounds,
+                 schedule_steps, visiting_orders)
 from .model import MRF
 
 _RING_MESSAGE = r"""
@@ -61,6 +62,7 @@ def belief_propagation_gpu(
     damping: float = 0.0,
     seed: int = 0,
     progress: Callable[[int, float], None] | None = None,
+    initial: np.ndarray | None = None,
 ) -> BPResult:
     """Loopy BP on the GPU; the messages of the CPU backend's schedule.
 
@@ -97,6 +99,7 @@ def belief_propagation_gpu(
     unary = cp.asarray(mrf.unary, dtype=cp.float64)
     inc_gpu = cp.asarray(inc)
     messages = cp.ones((n_dir + 1, n_t), dtype=cp.float32)  # last row: the padding
+    messages[:n_dir] = cp.asarray(initial_messages(initial, len(edges), n_t, np.float32))
     threads = 256
 
     def batches(steps: Steps) -> list[tuple]:
@@ -117,8 +120,9 @@ def belief_propagation_gpu(
         blocks = (h.size + threads - 1) // threads
         kernel((blocks,), (threads,), (h, h.sum(axis=1), outs, *rings, np.int64(len(outs)), np.int32(n_t),
                                        np.float32(mrf.lam), np.float32(mrf.rho**2), raw))
-        new = (1.0 - damping) * (raw / raw.max(axis=1, keepdims=True)) + damping * messages[outs]
-        change = float(cp.abs(new - messages[outs]).max())
+        old = messages[outs]
+        new = (1.0 - damping) * (raw / raw.max(axis=1, keepdims=True)) + damping * old
+        change = float(cp.abs(new - old).max())
         messages[outs] = new
         return change
 
@@ -134,4 +138,5 @@ def belief_propagation_gpu(
     history, seconds, converged = iterate(update, iterations, tol, progress)
     b = unary * cp.prod(messages[inc_gpu].astype(cp.float64), axis=1)
     marg = cp.asnumpy((b / b.sum(axis=1, keepdims=True)).astype(cp.float32))
-    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history))
+    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history),
+                    backend="gpu")

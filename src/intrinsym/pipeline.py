@@ -605,6 +605,14 @@ class Result:
         the trivial weight BP used, ``info["identity"]``)."""
         return _extraction_params(self.params, self.info.get("identity", {}))
 
+    def mrf(self) -> model.MRF:
+        """The MRF of BP's first pass (``unary``, the source graph, the target rings and
+        the resolved lambda); needs ``support``."""
+        if self.support is None:
+            raise ValueError("the result has no support (geodesics) to rebuild its MRF from")
+        return model.MRF(self.unary, self.edges, self.support.edge_length, self.support.targets,
+                         self.info["resolved"]["lambda_normalised"], self.params.rho)
+
     @property
     def passes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """(marginals, unary) of every BP pass after the first, as the extraction takes
@@ -839,7 +847,7 @@ def _solve(
         },
         "seconds": clock.seconds,
         "bp": {
-            "backend": bp.resolve_backend(p.backend, p.schedule, dtype.type),
+            "backend": res.backend,
             "iterations": res.iterations,
             "converged": res.converged,
             "max_change": res.max_change,
