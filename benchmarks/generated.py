@@ -1,7 +1,7 @@
-"""End-to-end recovery of the generated shapes' known symmetries (issue 4).
+"""End-to-end recovery of the generated shapes' known symmetries.
 
 Runs the public pipeline (:func:`intrinsym.detect` / :func:`intrinsym.match`) on the
-shapes of :mod:`intrinsym.shapes` and checks the issue's acceptance criteria:
+shapes of :mod:`intrinsym.shapes` and checks these criteria:
 
 1. cuboctahedron: from the source sample nearest each of the 12 vertices, the peaks of
    its marginal and the images of it under the parts :func:`intrinsym.extract.query`
@@ -12,7 +12,7 @@ shapes of :mod:`intrinsym.shapes` and checks the issue's acceptance criteria:
 3. the paper's segmentation score of the extracted symmetry that best realises one of
    the shape's ground-truth maps is at least 0.90 for every labelled part (and, for the
    cuboctahedron, how many of its 47 maps are realised that well);
-4. the partial shape (two identical limbs on an asymmetric body, issue 3), at the
+4. the partial shape (two identical limbs on an asymmetric body), at the
    library's default sizes on three seeds: the limb points' marginals peak on the other
    limb, the off-limb points' on nothing (median peak mass,
    :func:`intrinsym.evaluate.partial_scores`), and no global symmetry is extracted.
@@ -21,18 +21,18 @@ The symmetric shapes run several BP passes (``PASSES``; each further pass finds
 another mode of the posterior, see ``intrinsym.Params.passes``), the others the
 library's default.
 
-It also matches Sumner's horse-01 to horse-03 (``../shared/data/sumner_horse``, skipped
-when absent) and asks whether both the identity and the left/right swap appear among the
-extracted symmetries, judged on the mirror-symmetric reference pose: a symmetry over at
-least ``HORSE_SIZE`` of the source samples whose off-plane pairs lie nearer the map's
-image than the other map's for at least ``HORSE_SIDE`` of them and within 0.05 of the
-other map's image for at most ``HORSE_MIXED`` (not a patchwork of the two). How
-precise each is (the largest share of its pairs within 0.05 of its image) is reported
-beside.
+It also matches Sumner's horse-01 to horse-03 (``sumner_horse/`` of the data folder,
+``--data`` or ``$INTRINSYM_DATA``; the case is skipped with one row when absent) and
+asks whether both the identity and the left/right swap appear among the extracted
+symmetries, judged on the mirror-symmetric reference pose: a symmetry over at least
+``HORSE_SIZE`` of the source samples whose off-plane pairs lie nearer the map's image
+than the other map's for at least ``HORSE_SIDE`` of them and within 0.05 of the other
+map's image for at most ``HORSE_MIXED`` (not a patchwork of the two). How precise each
+is (the largest share of its pairs within 0.05 of its image) is reported beside.
 
 Prints one table and exits 1 when a criterion fails::
 
-    python benchmarks/generated.py [--quick] [--cache DIR]
+    python benchmarks/generated.py [--quick] [--cache DIR] [--data DIR]
 
 With ``--cache DIR`` each pipeline result is saved under ``DIR/<case>`` and, on later
 runs, loaded from there and only re-extracted (to measure changes of the extraction
@@ -44,6 +44,7 @@ Lengths are in units of sqrt(surface area), as everywhere in intrinsym.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from dataclasses import dataclass, field
@@ -52,7 +53,10 @@ from pathlib import Path
 import numpy as np
 
 import intrinsym
-from intrinsym import descriptors, evaluate, extract, geodesics, mesh, shapes, spectral
+from _data import add_data_argument, data_folder, no_data
+from intrinsym import descriptors, evaluate, extract, geodesics, shapes, spectral
+from intrinsym.shape import from_arrays, surface_area
+from intrinsym.vertex_maps import fitted_vertex_map
 
 #: A peak or image "lands on" a vertex when it lies within this geodesic distance of it
 #: (the cuboctahedron's edge is 0.325; the nearest source sample may lie ~0.04 away).
@@ -65,8 +69,8 @@ SEGMENTATION = 0.9
 #: BP alone took 693 s for the cuboctahedron at (250, 4000) and 432 s for the star at
 #: (150, 1500) on the 2-core development machine while another job shared it.
 SIZES = {"full": (150, 1500), "quick": (60, 600)}
-#: The partial shape runs at the library's default sizes (issue 3 is judged there), and
-#: on several seeds.
+#: The partial shape runs at the library's default sizes (its criteria are judged there),
+#: and on several seeds.
 PARTIAL_SIZES = {SIZES["full"]: (250, 4000), SIZES["quick"]: (150, 2000)}
 PARTIAL_SEEDS = (0, 1, 2)
 #: Partial shape: smallest limb mirror hit, and largest median peak mass off the limbs.
@@ -76,7 +80,6 @@ OFF_MASS = 0.2
 PASSES = {"cuboctahedron": 12, "star": 5, "lantern": 3}
 #: Laplace-Beltrami eigenpairs of the seeded ZoomOut vertex maps.
 EIGENPAIRS = 60
-HORSE = Path(__file__).resolve().parents[2] / "shared" / "data" / "sumner_horse"
 #: Horse: a symmetry "is" the identity (or the swap) when it covers this share of Ps, at
 #: least HORSE_SIDE of its off-plane pairs lie nearer that map's image than the other's,
 #: and at most HORSE_MIXED lie within 0.05 of the other's.
@@ -124,10 +127,10 @@ def cached(cache: Path | None, name: str, run) -> tuple[intrinsym.Result, float]
     start = time.perf_counter()
     if folder is not None and (folder / "result.npz").exists():
         result = intrinsym.Result.load(folder)
-        result.extraction = extract.from_result(result.marginals, result.edges, result.support,
-                                                result.source_points, result.target_points,
-                                                result.extraction_params(), unary=result.unary,
-                                                passes=result.passes)
+        result.extraction = extract.extract_from_support(result.marginals, result.edges, result.support,
+                                                         result.source_points, result.target_points,
+                                                         result.extraction_params(), unary=result.unary,
+                                                         passes=result.passes)
     else:
         result = run()
         if folder is not None:
@@ -137,7 +140,7 @@ def cached(cache: Path | None, name: str, run) -> tuple[intrinsym.Result, float]
 
 def geodesic_graph(vertices: np.ndarray, faces: np.ndarray):
     """Geodesic graph of a mesh scaled to unit surface area (the pipeline's units)."""
-    area = mesh.surface_area(mesh.from_arrays(vertices, faces))
+    area = surface_area(from_arrays(vertices, faces))
     return geodesics.surface_graph(np.asarray(vertices) / np.sqrt(area), faces)
 
 
@@ -158,14 +161,14 @@ def corner_recovery(result: intrinsym.Result, shape: shapes.GeneratedShape) -> t
     passes = result.passes
     found_peaks, found_parts = [], []
     for i in range(len(corners)):
-        s = int(np.argmin(dist[i, result.source_vertex]))
+        s = int(np.argmin(dist[i, result.source_point_vertex]))
         peaks = extract.peaks(result.marginals[s], result.support.targets, params.threshold, params.peak_radius)
-        parts = extract.from_result(result.marginals, result.edges, result.support, result.source_points,
-                                    result.target_points, params, source=s, unary=result.unary, passes=passes)
+        parts = extract.query_from_support(result.marginals, result.edges, result.support, result.source_points,
+                                           result.target_points, s, params, unary=result.unary, passes=passes)
         images = [int(p.target[np.searchsorted(p.source, s)]) for p in parts if p.kind != "identity"]
         others = np.delete(dist, i, axis=0)
         for found, targets in ((found_peaks, peaks), (found_parts, images)):
-            near = others[:, result.target_vertex[np.asarray(targets, dtype=np.int64)]]
+            near = others[:, result.target_point_vertex[np.asarray(targets, dtype=np.int64)]]
             found.append(float(np.mean(near.min(axis=1, initial=np.inf) < RADIUS)))
     return np.array(found_peaks), np.array(found_parts)
 
@@ -174,8 +177,8 @@ def arm_matrix(result: intrinsym.Result, source_labels: np.ndarray, target_label
     """(k, k) array: entry (i, j) is the largest share of arm i's source samples that one
     extracted symmetry maps into arm j (arms labelled 1..k)."""
     k = int(source_labels.max())
-    arm_s = source_labels[result.source_vertex]
-    arm_t = target_labels[result.target_vertex]
+    arm_s = source_labels[result.source_point_vertex]
+    arm_t = target_labels[result.target_point_vertex]
     share = np.zeros((k, k))
     for sym in result.extraction.symmetries:
         src, img = arm_s[sym.source], arm_t[sym.target]
@@ -193,7 +196,7 @@ def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
     One that covers at least ``global_fraction`` of the source samples by seeded ZoomOut
     from its sample pairs (:func:`intrinsym.spectral.seeded_symmetry`, as
     ``symmetry_map.npy`` is made, in two-shape mode from ``source`` into ``target``), the
-    others by :func:`intrinsym.extract.fitted_vertex_map`.
+    others by :func:`intrinsym.vertex_maps.fitted_vertex_map`.
     """
     params = result.extraction_params()
     evecs = descriptors.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
@@ -203,12 +206,12 @@ def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
     maps = []
     for sym in result.extraction.symmetries:
         if len(sym.source) >= params.global_fraction * len(result.marginals):
-            maps.append(spectral.seeded_symmetry(source.vertices, evecs, result.source_vertex[sym.source],
-                                                 result.target_vertex[sym.target], result.params.zoomout_seed,
+            maps.append(spectral.seeded_symmetry(source.vertices, evecs, result.source_point_vertex[sym.source],
+                                                 result.target_point_vertex[sym.target], result.params.zoomout_seed,
                                                  result.params.zoomout_final, **other))
         else:
-            maps.append(extract.fitted_vertex_map(sym, result.support, result.edges, result.source_points,
-                                                  result.target_points, result.target_vertex, params))
+            maps.append(fitted_vertex_map(sym, result.support, result.edges, result.source_points,
+                                          result.target_points, result.target_point_vertex, params))
     return maps
 
 
@@ -247,16 +250,16 @@ def check_segmentation(report: Report, name: str, result: intrinsym.Result, sour
 
 def summary(report: Report, name: str, result: intrinsym.Result, seconds: float) -> None:
     ex = result.extraction
-    bp = result.info["bp"]
+    bp = result.info.bp
     kinds = f"{len(ex.symmetries)} symmetries, global #{ex.global_index}"
-    report.add(name, f"|Ps| {len(result.marginals)} |Pt| {result.marginals.shape[1]}, BP it {bp['iterations']}"
-               f"{'' if bp['converged'] else ' (not converged)'}", kinds, None, seconds)
+    report.add(name, f"|Ps| {len(result.marginals)} |Pt| {result.marginals.shape[1]}, BP it {bp.iterations}"
+               f"{'' if bp.converged else ' (not converged)'}", kinds, None, seconds)
 
 
 def run_cuboctahedron(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
     shape = shapes.cuboctahedron()
-    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect(
-        (shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1], **overrides))
+    params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
+    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect((shape.vertices, shape.faces), params))
     summary(report, shape.name, result, seconds)
     peaks, parts = corner_recovery(result, shape)
     for what, found in (("marginal peaks", peaks), ("query parts", parts)):
@@ -269,8 +272,8 @@ def run_cuboctahedron(report: Report, sizes: tuple[int, int], cache: Path | None
 
 def run_star(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
     shape = shapes.star(5)
-    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect(
-        (shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1], **overrides))
+    params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
+    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect((shape.vertices, shape.faces), params))
     summary(report, shape.name, result, seconds)
     check_arms(report, shape.name, result, shape.labels, shape.labels, include_self=False)
     check_segmentation(report, shape.name, result, shape, shape)
@@ -278,8 +281,9 @@ def run_star(report: Report, sizes: tuple[int, int], cache: Path | None, overrid
 
 def run_lantern(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
     a, b = shapes.lantern()
-    result, seconds = cached(cache, "lantern", lambda: intrinsym.match(
-        (a.vertices, a.faces), (b.vertices, b.faces), n_source=sizes[0], n_target=sizes[1], **overrides))
+    params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
+    result, seconds = cached(cache, "lantern",
+                             lambda: intrinsym.match((a.vertices, a.faces), (b.vertices, b.faces), params))
     summary(report, "lantern", result, seconds)
     check_arms(report, "lantern", result, a.labels, b.labels, include_self=True)
     check_segmentation(report, "lantern", result, a, b)
@@ -287,28 +291,31 @@ def run_lantern(report: Report, sizes: tuple[int, int], cache: Path | None, over
 
 def run_figure(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
     shape = shapes.figure()
-    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect(
-        (shape.vertices, shape.faces), n_source=sizes[0], n_target=sizes[1], **overrides))
+    params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
+    result, seconds = cached(cache, shape.name, lambda: intrinsym.detect((shape.vertices, shape.faces), params))
     summary(report, shape.name, result, seconds)
     check_segmentation(report, shape.name, result, shape, shape)
 
 
 def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
-    """Issue 3's partial symmetry: limb points peak on the other limb, off-limb points
+    """The partial symmetry: limb points peak on the other limb, off-limb points
     on nothing (no invented self-map of the body, no global symmetry extracted)."""
     shape = shapes.partial()
     n_source, n_target = PARTIAL_SIZES[sizes]
     for seed in PARTIAL_SEEDS:
         name = f"partial s{seed}"
-        result, seconds = cached(cache, f"partial-{seed}", lambda: intrinsym.detect(
-            (shape.vertices, shape.faces), n_source=n_source, n_target=n_target, seed=seed, **overrides))
+        params = intrinsym.make_params(n_source=n_source, n_target=n_target, seed=seed, **overrides)
+        result, seconds = cached(cache, f"partial-{seed}",
+                                 functools.partial(intrinsym.detect, (shape.vertices, shape.faces), params))
         summary(report, name, result, seconds)
-        identity = result.info.get("identity", {})
+        identity = result.info.identity
+        weight, isometry, threshold = ((identity.weight, identity.isometry, identity.threshold)
+                                       if identity is not None else (None, None, None))
         report.add(name, "trivial weight (auto: argmax edges kept)",
-                   f"{result.params.trivial_weight} -> {identity.get('weight')} ({identity.get('isometry', np.nan):.2f}"
-                   f" < {identity.get('threshold', np.nan)})", None)
+                   f"{result.params.trivial_weight} -> {weight} ({np.nan if isometry is None else isometry:.2f}"
+                   f" < {threshold})", None)
         scores = {what: evaluate.partial_scores(shape.vertices, shape.faces, shape.labels, shape.symmetries[0], m,
-                                                result.source_vertex, result.target_vertex)
+                                                result.source_point_vertex, result.target_point_vertex)
                   for what, m in (("unary", result.unary), ("BP", result.marginals))}
         report.add(name, f"limb mirror hit unary / BP (BP >= {LIMB_HIT})",
                    f"{scores['unary'].limb_hit:.2f} / {scores['BP'].limb_hit:.2f}", scores["BP"].limb_hit >= LIMB_HIT)
@@ -319,7 +326,8 @@ def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, over
                    result.extraction.global_index < 0)
 
 
-def horse_sides(result: intrinsym.Result, reference: np.ndarray, scale: float) -> list[tuple[float, float, float, float]]:
+def horse_sides(result: intrinsym.Result, reference: np.ndarray,
+                scale: float) -> list[tuple[float, float, float, float]]:
     """For every extracted symmetry: share of its off-plane pairs that keep their side,
     share that swap sides, share that lie nearer their own side than the mirrored one,
     and its share of the source samples.
@@ -334,26 +342,33 @@ def horse_sides(result: intrinsym.Result, reference: np.ndarray, scale: float) -
     off_plane = np.abs(reference[:, 0] - centre) > 0.05 * scale
     out = []
     for sym in result.extraction.symmetries:
-        a, b = result.source_vertex[sym.source], result.target_vertex[sym.target]
+        a, b = result.source_point_vertex[sym.source], result.target_point_vertex[sym.target]
         keep = off_plane[a]
         same = np.linalg.norm(reference[b] - reference[a], axis=1) < 0.05 * scale
         swap = np.linalg.norm(reference[b] - mirrored[a], axis=1) < 0.05 * scale
-        nearer = np.linalg.norm(reference[b] - reference[a], axis=1) < np.linalg.norm(reference[b] - mirrored[a], axis=1)
+        nearer = (np.linalg.norm(reference[b] - reference[a], axis=1)
+                  < np.linalg.norm(reference[b] - mirrored[a], axis=1))
         n = max(int(keep.sum()), 1)
         out.append((float(np.sum(same & keep) / n), float(np.sum(swap & keep) / n), float(np.sum(nearer & keep) / n),
                     len(sym.source) / len(result.marginals)))
     return out
 
 
-def run_horse(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
-    if not HORSE.exists():
-        report.add("horse", f"skipped: {HORSE} absent", "", None)
+def run_horse(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict,
+              data: str | None = None) -> None:
+    """Horse-01 matched to horse-03 (``sumner_horse/`` of the data folder ``data``, else
+    of ``$INTRINSYM_DATA``): do the identity and the left/right swap both appear?"""
+    folder = data_folder(data)
+    horse = None if folder is None else folder / "sumner_horse"
+    if horse is None or not horse.is_dir():
+        report.add("horse", no_data("horse case", data if horse is None else horse), "", None)
         return
-    result, seconds = cached(cache, "horse", lambda: intrinsym.match(
-        HORSE / "horse-01.obj", HORSE / "horse-03.obj", n_source=sizes[0], n_target=sizes[1], **overrides))
+    params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
+    result, seconds = cached(cache, "horse",
+                             lambda: intrinsym.match(horse / "horse-01.obj", horse / "horse-03.obj", params))
     summary(report, "horse 01->03", result, seconds)
-    ref = intrinsym.load(HORSE / "horse_ref.obj")
-    scale = float(np.sqrt(mesh.surface_area(ref)))
+    ref = intrinsym.load(horse / "horse_ref.obj")
+    scale = float(np.sqrt(surface_area(ref)))
     sides = horse_sides(result, np.asarray(ref.vertices), scale)
     for i, (same, swap, nearer, size) in enumerate(sides[:6]):
         report.add("horse 01->03", f"symmetry #{i} ({size:.2f} of Ps): same / swapped side",
@@ -379,17 +394,20 @@ CASES = {"cuboctahedron": run_cuboctahedron, "star": run_star, "lantern": run_la
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help=f"smaller samples {SIZES['quick']} instead of {SIZES['full']}")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"smaller samples {SIZES['quick']} instead of {SIZES['full']}")
     parser.add_argument("--cache", type=Path, help="save results here; later runs load and re-extract them")
     parser.add_argument("--passes", type=int, help="BP passes (default: the library's)")
     parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="cases to run")
+    add_data_argument(parser, "research data folder with sumner_horse/, for the horse case")
     args = parser.parse_args(argv)
+    cases = dict(CASES, horse=functools.partial(run_horse, data=args.data))
     sizes = SIZES["quick" if args.quick else "full"]
     cache = None if args.cache is None else args.cache / ("quick" if args.quick else "full")
     report = Report()
     for name in args.cases:
         passes = args.passes if args.passes is not None else PASSES.get(name)
-        CASES[name](report, sizes, cache, {} if passes is None else {"passes": passes})
+        cases[name](report, sizes, cache, {} if passes is None else {"passes": passes})
     report.print()
     return 1 if report.failed else 0
 

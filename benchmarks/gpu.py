@@ -3,7 +3,7 @@
 For every mesh, runs :func:`intrinsym.detect` at the given sizes to build its MRF (the
 unary BP ran on, the source graph, the target rings), then runs BP on that one MRF with
 the colour schedule (the default) and the flooding schedule, each on the CPU and on the
-GPU (:mod:`intrinsym.bp_gpu`), each to convergence, and prints seconds per iteration
+GPU (:mod:`intrinsym.bp.gpu`), each to convergence, and prints seconds per iteration
 (median), iterations, seconds to convergence, and how far the GPU's marginals lie from
 the CPU's of the same schedule (the same messages: largest relative difference, and the
 share of rows whose argmax agrees)::
@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 import intrinsym
-from intrinsym import bp, bp_gpu, model
+from intrinsym import bp, model
 
 #: Largest relative difference of the GPU's marginals from the CPU's
 #: (float32 messages both, float64 products; tests/test_bp.py asserts 1e-4 on a small MRF).
@@ -35,8 +35,9 @@ MAX_RELATIVE = 1e-3
 
 def mrf_of(path: Path, n_source: int, n_target: int) -> tuple[model.MRF, dict]:
     """The MRF a default detect run solved (its final unary), and the run's sizes."""
-    res = intrinsym.detect(path, n_source=n_source, n_target=n_target, iterations=1, trivial_weight=0.0)
-    return res.mrf(), res.info["sizes"]
+    params = intrinsym.make_params(n_source=n_source, n_target=n_target, iterations=1, trivial_weight=0.0)
+    res = intrinsym.detect(path, params)
+    return res.mrf(), res.info.sizes
 
 
 def run_backend(mrf: model.MRF, schedule: str, backend: str) -> bp.BPResult:
@@ -51,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="|Ps| |Pt| (default: the paper's elephant, 271 12722)")
     parser.add_argument("--json", action="store_true", help="one JSON object per mesh instead of a table")
     args = parser.parse_args(argv)
-    if not bp_gpu.available():
+    if not bp.gpu_available():
         print("the GPU backend is unavailable: CuPy sees no CUDA device", file=sys.stderr)
         return 1
     import cupy
@@ -85,8 +86,9 @@ def main(argv: list[str] | None = None) -> int:
             r, a = row[f"{backend} {schedule}"], agreement[schedule]
             agree = (f"max rel. diff {a['relative_difference']:.1e}, argmax {a['argmax_agreement']:.3f}"
                      if backend == "gpu" else "")
-            print(f"| {path.name} | {sizes['source']} / {sizes['target']} | {sizes['directed_edges']} | {backend} {schedule} | "
-                  f"{r['seconds_per_iteration']:.4f} | {r['iterations']} | {r['seconds']:.2f} | {agree} |")
+            print(f"| {path.name} | {sizes['source']} / {sizes['target']} | {sizes['directed_edges']} "
+                  f"| {backend} {schedule} "
+                  f"| {r['seconds_per_iteration']:.4f} | {r['iterations']} | {r['seconds']:.2f} | {agree} |")
     return 1 if failed else 0
 
 

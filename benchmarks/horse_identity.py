@@ -10,9 +10,10 @@ off-plane source samples have their argmax within 0.05 sqrt(area) of the identit
 of the left/right swap (judged on the mirror-symmetric reference pose, as
 ``benchmarks/generated.py`` judges the horse). A mode of the model would keep BP there::
 
-    python benchmarks/horse_identity.py [--sizes 150 1500]
+    python benchmarks/horse_identity.py [--data DIR] [--sizes 150 1500]
 
-Exits 0 with a message when ``../shared/data/sumner_horse`` is absent.
+The frames are ``sumner_horse/`` of the data folder (``--data`` or ``$INTRINSYM_DATA``);
+without it the script says so in one line and exits 0.
 """
 
 from __future__ import annotations
@@ -20,14 +21,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-from pathlib import Path
 
 import numpy as np
 
 import intrinsym
-from intrinsym import bp, evaluate, mesh, model
+from _data import add_data_argument, data_folder, no_data
+from intrinsym import bp, evaluate, model
+from intrinsym.shape import surface_area
 
-HORSE = Path(__file__).resolve().parents[2] / "shared" / "data" / "sumner_horse"
 #: Iteration counts after which the argmax is scored (BP stops earlier when it converges).
 CHECKPOINTS = (1, 3, 10, 100)
 
@@ -46,18 +47,21 @@ def point_mass_messages(mrf: model.MRF, labels: np.ndarray) -> np.ndarray:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_data_argument(parser, "research data folder with sumner_horse/")
     parser.add_argument("--sizes", nargs=2, type=int, default=(150, 1500), metavar=("PS", "PT"))
     args = parser.parse_args(argv)
-    if not HORSE.is_dir():
-        print(f"skipped: {HORSE} absent")
+    data = data_folder(args.data)
+    horse = None if data is None else data / "sumner_horse"
+    if horse is None or not horse.is_dir():
+        print(no_data("horse_identity.py", args.data if horse is None else horse))
         return 0
-    res = intrinsym.match(HORSE / "horse-01.obj", HORSE / "horse-03.obj", n_source=args.sizes[0],
+    res = intrinsym.match(horse / "horse-01.obj", horse / "horse-03.obj", n_source=args.sizes[0],
                           n_target=args.sizes[1])
-    ref = intrinsym.load(HORSE / "horse_ref.obj")
+    ref = intrinsym.load(horse / "horse_ref.obj")
     vertices = np.asarray(ref.vertices)
-    scale = np.sqrt(mesh.surface_area(ref))
+    scale = np.sqrt(surface_area(ref))
     swap = evaluate.extrinsic_mirror(vertices)[0]
-    a, tv = res.source_vertex, res.target_vertex
+    a, tv = res.source_point_vertex, res.target_point_vertex
     off_plane = np.abs(vertices[a, 0] - vertices[:, 0].mean()) > 0.05 * scale
 
     def score(beliefs: np.ndarray) -> str:
@@ -76,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         start = point_mass_messages(mrf, res.support.vertex_target[vertex])
         for k in CHECKPOINTS:
             run = bp.belief_propagation(dataclasses.replace(mrf, unary=unary), "colour", k, res.params.bp_tol,
-                                        initial=start)
+                                        backend="cpu", initial=start)
             print(f"  {name} unary, from the true {truth}, {run.iterations} iterations: {score(run.marginals)}")
             if run.converged:
                 break

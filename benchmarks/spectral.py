@@ -1,22 +1,23 @@
-"""The spectral baseline's global map on the README's TOSCA / KIDS table (issue 4).
+"""The spectral baseline's global map on the TOSCA / KIDS table of docs/results.md.
 
 Runs :func:`intrinsym.spectral.spectral_symmetry` (sign search over Laplace-Beltrami
-eigenfunctions, then ZoomOut) on every shape of the README's "Default settings on TOSCA
-and KIDS" table and scores its map exactly as that table scores ours
+eigenfunctions, then ZoomOut) on every shape of the "Default settings on TOSCA and KIDS"
+table of docs/results.md and scores its map exactly as that table scores ours
 (:func:`intrinsym.evaluate.score_map`, what ``intrinsym evaluate`` runs: fraction of
 vertices whose image lies within 0.05 and 0.10 of sqrt(area) of the true mirror image,
 geodesic, and the mean error)::
 
-    python benchmarks/spectral.py [--data ../shared/data] [--shapes cat1 kids] [--json]
+    python benchmarks/spectral.py [--data DIR] [--shapes cat1 kids] [--json]
 
 Prints a markdown table (``--json``: one JSON object per shape instead). ``seconds`` is
 the wall time of ``spectral_symmetry`` alone (eigenpairs included, loading and scoring
-not). Skips (exit 0, a message) when the data folder is absent.
+not). The data folder is ``--data`` or ``$INTRINSYM_DATA``; without it the script says
+so in one line and exits 0.
 
 On a machine whose cores are busy with other work, OpenBLAS threads waiting on each
 other slow the eigensolver and ZoomOut's small matrix products down (measured back to
 back on the 2-core development machine while other jobs ran: michael1 25.8 s with the
-default threads, 14.8 s with one; wolf0 4.9 s and 1.6 s), so the README's numbers were
+default threads, 14.8 s with one; wolf0 4.9 s and 1.6 s), so the numbers of docs/results.md were
 taken with ``OPENBLAS_NUM_THREADS=1``.
 """
 
@@ -30,9 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from intrinsym import evaluate, mesh, spectral
+from _data import add_data_argument, data_folder, no_data
+from intrinsym import evaluate, spectral
+from intrinsym.io import load
+from intrinsym.shape import clean
 
-#: Shape name -> (mesh, ground-truth map) relative to the data folder, in the README's order.
+#: Shape name -> (mesh, ground-truth map) relative to the data folder, in the table's order.
 SHAPES = {
     **{
         name: (f"tosca_sym/{name}.off", f"tosca_sym/{name.rstrip('0123456789')}.sym")
@@ -43,14 +47,13 @@ SHAPES = {
     },
     "kids": ("kids_sym/0001.isometry.1.off", "kids_sym/sym.txt"),
 }
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
 def run(data: Path, name: str) -> dict:
     """Map one shape with the baseline and score it; a JSON-ready dict."""
     mesh_path, sym_path = SHAPES[name]
-    shape = mesh.load(data / mesh_path)
-    cleaned, vertex_map = mesh.clean(shape)
+    shape = load(data / mesh_path)
+    cleaned, vertex_map = clean(shape)
     start = time.perf_counter()
     image = spectral.spectral_symmetry(cleaned.vertices, cleaned.faces)
     seconds = time.perf_counter() - start
@@ -70,18 +73,19 @@ def run(data: Path, name: str) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
+    add_data_argument(parser)
     parser.add_argument("--shapes", nargs="+", choices=list(SHAPES), default=list(SHAPES))
     parser.add_argument("--json", action="store_true", help="one JSON object per shape")
     args = parser.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"research data not available: {args.data}")
+    data = data_folder(args.data)
+    if data is None:
+        print(no_data("spectral.py", args.data))
         return 0
     if not args.json:
         print("| shape | map within 0.05 | map within 0.10 | map mean error | seconds |")
         print("|---|---|---|---|---|")
     for name in args.shapes:
-        row = run(args.data, name)
+        row = run(data, name)
         if args.json:
             print(json.dumps(row))
         else:

@@ -1,7 +1,8 @@
-"""Shared fixtures: small generated shapes and the optional shared research data."""
+"""Shared fixtures: small generated shapes and the optional research data set."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -9,15 +10,32 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+#: The research data folder: $INTRINSYM_DATA, else the development checkout's default beside the repository.
+DATA = Path(os.environ.get("INTRINSYM_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
 
 
 def shared(relative: str) -> Path:
-    """Path of a file of ../shared/data, skipping the test when it is absent."""
+    """Path of a file of the research data folder ``DATA``, skipping the test when it is absent."""
     path = DATA / relative
     if not path.exists():
-        pytest.skip(f"research data not available: {path} (the shared data folder is absent)")
+        pytest.skip(f"research data not available: {path} (set INTRINSYM_DATA to the research data folder)")
     return path
+
+
+# A square pyramid: quad base (0, 1, 2, 3) and apex 4.
+PYRAMID_V = np.array(
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1.0]], dtype=np.float64
+)
+PYRAMID_F = np.array(  # the quad fan-triangulated from its first corner, then the sides
+    [[0, 3, 2], [0, 2, 1], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]], dtype=np.int64
+)
+
+
+def sphere_points(n: int, seed: int = 0, radius: float = 1.0) -> np.ndarray:
+    """(n, 3) random points on the sphere of the given radius."""
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    return radius * p / np.linalg.norm(p, axis=1, keepdims=True)
 
 
 def mirror_shape() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -49,7 +67,8 @@ def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
 
     Returns the result directory and the (V, 3) vertices.
     """
-    from intrinsym.pipeline import Params, Result
+    from intrinsym import Params, Result
+    from intrinsym.runinfo import BPStats, Resolved, RunInfo, Sizes
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
@@ -64,12 +83,12 @@ def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
     marginals[np.arange(len(sources)), antipode] = 1.0
     _, nearest = cKDTree(v[sources]).query(v[sources], k=4)
     edges = np.unique(np.sort(np.column_stack([np.repeat(nearest[:, 0], 3), nearest[:, 1:].ravel()]), axis=1), axis=0)
-    info = {
-        "mode": "detect", "input": str(path), "preset": "default",
-        "sizes": {"source": len(sources), "target": len(v), "edges": len(edges)},
-        "seconds": {"bp": 0.0}, "resolved": {"scale": 1.0},
-        "bp": {"iterations": 1, "converged": True, "max_change": 0.0},
-    }
+    info = RunInfo(
+        mode="detect", input=str(path),
+        sizes=Sizes(len(sources), len(v), len(edges), 2 * len(edges), 3, 0, len(v), len(v)),
+        resolved=Resolved(1.0, 1.0, 0.1, 0.05, 0.5, 1e-3, 1.0), seconds={"bp": 0.0},
+        bp=BPStats("cpu", 1, True, 0.0, (0.0,), 0.0, 0.0, 0),
+    )
     out = folder / "out"
     Result(v[sources], v.copy(), sources, np.arange(len(v)), edges.astype(np.int64), marginals, marginals,
            Params(), info).save(out)

@@ -6,16 +6,16 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from test_bp import sphere_problem
 
 from intrinsym import bench
 from intrinsym.cli import main
+from test_bp import sphere_problem
 
 
 def test_message_timing_compares_equal_messages():
     mrf, _ = sphere_problem(20, 600, 3, seed=11)
     dense_s, sparse_s, diff = bench.message_timing(mrf, n_messages=4, block=128)
-    assert dense_s > 0 and sparse_s > 0
+    assert dense_s > sparse_s  # Eq. 7 over the whole |Pt| x |Pt| table against the rings
     assert diff < 1e-5  # float32 sparse kernel against the float64 dense Eq. 7
 
 

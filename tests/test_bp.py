@@ -3,24 +3,25 @@ and BP on a tree against brute-force enumeration."""
 
 from __future__ import annotations
 
+import inspect
 import itertools
+import typing
 
 import numpy as np
 import pytest
 
-from intrinsym.bp import (
-    belief_propagation,
-    belief_propagation_dense,
-    incoming_edges,
-    resolve_backend,
-    schedule_steps,
+from intrinsym import params
+from intrinsym.bp import BACKENDS, SCHEDULES, belief_propagation, belief_propagation_dense, resolve_backend
+from intrinsym.bp.cpu import weight_polynomial
+from intrinsym.bp.gpu import available as gpu_available
+from intrinsym.bp.schedule import (
     active_steps,
+    colour_classes,
+    incoming_edges,
+    schedule_steps,
     serial_orders,
     visiting_orders,
-    colour_classes,
-    weight_polynomial,
 )
-from intrinsym import bp_gpu
 from intrinsym.geodesics import SparseDistances
 from intrinsym.model import MRF, lambda_for_tolerance, pairwise_dense
 
@@ -67,16 +68,12 @@ def sphere_problem(n_source: int, n_target: int, k: int, seed: int, tolerance: f
 
 
 @pytest.mark.parametrize("schedule", ["serial", "colour", "flooding"])
-@pytest.mark.parametrize(
-    "n_source,n_target,k,iters", [(40, 300, 4, 6), (12, 2000, 3, 2)]
-)
+@pytest.mark.parametrize("n_source,n_target,k,iters", [(40, 300, 4, 6), (12, 2000, 3, 2)])
 def test_sparse_equals_dense_oracle(schedule, n_source, n_target, k, iters):
     mrf, d_tt = sphere_problem(n_source, n_target, k, seed=n_target)
     kw = dict(schedule=schedule, iterations=iters, tol=0.0, seed=3)
-    sparse = belief_propagation(mrf, dtype=np.float64, **kw)
-    dense = belief_propagation_dense(
-        mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, **kw
-    )
+    sparse = belief_propagation(mrf, dtype=np.float64, backend="cpu", **kw)
+    dense = belief_propagation_dense(mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, **kw)
     assert sparse.iterations == dense.iterations == iters
     assert np.abs(sparse.marginals - dense.marginals).max() < 1e-6
     assert np.allclose(sparse.history, dense.history, atol=1e-6)
@@ -89,26 +86,26 @@ def test_initial_messages_match_oracle(schedule):
     mrf, d_tt = sphere_problem(40, 300, 4, seed=301)
     start = np.random.default_rng(0).uniform(0.2, 1.0, size=(2 * len(mrf.edges), 300))
     kw = dict(schedule=schedule, iterations=2, tol=0.0, seed=3)
-    sparse = belief_propagation(mrf, dtype=np.float64, initial=start, **kw)
+    sparse = belief_propagation(mrf, dtype=np.float64, initial=start, backend="cpu", **kw)
     dense = belief_propagation_dense(mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, initial=start, **kw)
     assert np.abs(sparse.marginals - dense.marginals).max() < 1e-6
     # the start matters: from all ones BP is elsewhere after two iterations
-    ones = belief_propagation(mrf, dtype=np.float64, **kw)
+    ones = belief_propagation(mrf, dtype=np.float64, backend="cpu", **kw)
     assert np.abs(sparse.marginals - ones.marginals).max() > 1e-3
     with pytest.raises(ValueError, match="shape"):
-        belief_propagation(mrf, initial=start[1:], **kw)
+        belief_propagation(mrf, initial=start[1:], backend="cpu", **kw)
     with pytest.raises(ValueError, match="positive"):
-        belief_propagation(mrf, initial=np.zeros_like(start), **kw)
+        belief_propagation(mrf, initial=np.zeros_like(start), backend="cpu", **kw)
 
 
 def test_residual_schedule_matches_oracle_and_saves_updates():
     mrf, d_tt = sphere_problem(40, 300, 4, seed=300)
     kw = dict(iterations=60, tol=1e-6, seed=3)
-    sparse = belief_propagation(mrf, schedule="residual", dtype=np.float64, **kw)
+    sparse = belief_propagation(mrf, schedule="residual", dtype=np.float64, backend="cpu", **kw)
     dense = belief_propagation_dense(
         mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, schedule="residual", **kw
     )
-    colour = belief_propagation(mrf, schedule="colour", dtype=np.float64, **kw)
+    colour = belief_propagation(mrf, schedule="colour", dtype=np.float64, backend="cpu", **kw)
     assert sparse.converged and colour.converged
     # the oracle skips exactly the same nodes
     assert sparse.updates == dense.updates
@@ -139,15 +136,16 @@ def test_active_steps_keeps_the_sends_of_active_nodes():
 def test_damped_flooding_matches_oracle():
     mrf, d_tt = sphere_problem(20, 400, 3, seed=1)
     kw = dict(schedule="flooding", iterations=4, tol=0.0, damping=0.5, seed=0)
-    sparse = belief_propagation(mrf, dtype=np.float64, **kw)
+    sparse = belief_propagation(mrf, dtype=np.float64, backend="cpu", **kw)
     dense = belief_propagation_dense(mrf.unary, mrf.edges, mrf.edge_length, d_tt, mrf.lam, mrf.rho, **kw)
     assert np.abs(sparse.marginals - dense.marginals).max() < 1e-6
 
 
 def test_float32_close_to_float64():
     mrf, _ = sphere_problem(30, 500, 4, seed=2)
-    a = belief_propagation(mrf, iterations=5, tol=0.0, dtype=np.float64)
-    b = belief_propagation(mrf, iterations=5, tol=0.0, dtype=np.float32)
+    kw = dict(schedule="serial", iterations=5, tol=0.0, backend="cpu")
+    a = belief_propagation(mrf, dtype=np.float64, **kw)
+    b = belief_propagation(mrf, dtype=np.float32, **kw)
     assert b.marginals.dtype == np.float32
     assert np.abs(a.marginals - b.marginals).max() < 1e-5
     assert np.allclose(b.marginals.sum(axis=1), 1.0, atol=1e-5)
@@ -158,7 +156,7 @@ def test_too_short_target_radius_is_refused():
     short = sparse_from_dense(d_tt, mrf.edge_length.max())
     bad = MRF(mrf.unary, mrf.edges, mrf.edge_length, short, mrf.lam, mrf.rho)
     with pytest.raises(ValueError, match="exact message needs"):
-        belief_propagation(bad)
+        belief_propagation(bad, schedule="serial", backend="cpu")
 
 
 def test_tree_marginals_equal_brute_force():
@@ -177,14 +175,14 @@ def test_tree_marginals_equal_brute_force():
     joint = np.zeros((n_label,) * 5)
     for labels in itertools.product(range(n_label), repeat=5):
         p = np.prod([unary[s, labels[s]] for s in range(5)])
-        for (i, j), d in zip(edges, length):
+        for (i, j), d in zip(edges, length, strict=True):
             p *= max(np.exp(-lam * (d - d_tt[labels[i], labels[j]]) ** 2), rho**2)
         joint[labels] = p
     joint /= joint.sum()
     exact = np.array([joint.sum(axis=tuple(a for a in range(5) if a != s)) for s in range(5)])
 
     for schedule in ("serial", "colour", "residual", "flooding"):
-        res = belief_propagation(mrf, schedule=schedule, iterations=50, tol=1e-12, dtype=np.float64)
+        res = belief_propagation(mrf, schedule=schedule, iterations=50, tol=1e-12, dtype=np.float64, backend="cpu")
         assert res.converged
         assert np.abs(res.marginals - exact).max() < 1e-9
 
@@ -202,7 +200,7 @@ def test_schedule_orders():
     for o in orders[1:]:
         assert sorted(o) == list(range(6))
     again = serial_orders(6, 3, seed=1)
-    assert all(np.array_equal(a, b) for a, b in zip(orders, again))
+    assert all(np.array_equal(a, b) for a, b in zip(orders, again, strict=True))
 
 
 def test_serial_steps_update_every_directed_edge_once():
@@ -255,9 +253,20 @@ def test_incoming_edges():
 def test_bad_arguments():
     mrf, _ = sphere_problem(5, 50, 2, seed=5)
     with pytest.raises(ValueError, match="schedule"):
-        belief_propagation(mrf, schedule="random")
+        belief_propagation(mrf, schedule="random", backend="cpu")
     with pytest.raises(ValueError, match="damping"):
-        belief_propagation(mrf, damping=1.0)
+        belief_propagation(mrf, schedule="serial", damping=1.0, backend="cpu")
+
+
+def test_defaults_equal_params_defaults():
+    """Called without a schedule or backend, BP runs as the pipeline does by default."""
+    defaults = inspect.signature(belief_propagation).parameters
+    p = params.Params()
+    assert defaults["schedule"].default == p.schedule == "colour"
+    assert defaults["backend"].default == p.backend == "auto"
+    assert defaults["iterations"].default == p.iterations
+    assert set(typing.get_args(params.Schedule)) == set(SCHEDULES)
+    assert set(typing.get_args(params.Backend)) == set(BACKENDS)
 
 
 @pytest.mark.parametrize("rho,tol", [(0.6, 1e-13), (0.4, 1e-12), (0.2, 1e-9), (0.1, 1e-8)])
@@ -278,7 +287,7 @@ def test_backend_choice():
         resolve_backend("tpu", "serial")
     assert resolve_backend("auto", "residual") == "cpu"
     assert resolve_backend("auto", "colour", np.float64) == "cpu"
-    if bp_gpu.available():
+    if gpu_available():
         assert resolve_backend("auto", "colour") == "gpu"
         assert resolve_backend("auto", "serial") == "gpu"
         with pytest.raises(ValueError, match="residual"):
@@ -289,9 +298,10 @@ def test_backend_choice():
             resolve_backend("gpu", "flooding")
 
 
-@pytest.mark.skipif(not bp_gpu.available(), reason="needs CuPy and a CUDA device")
-@pytest.mark.parametrize("schedule, damping", [("flooding", 0.0), ("flooding", 0.3), ("colour", 0.0),
-                                               ("colour", 0.3), ("serial", 0.0)])
+@pytest.mark.skipif(not gpu_available(), reason="needs CuPy and a CUDA device")
+@pytest.mark.parametrize(
+    "schedule, damping", [("flooding", 0.0), ("flooding", 0.3), ("colour", 0.0), ("colour", 0.3), ("serial", 0.0)]
+)
 def test_gpu_equals_cpu(schedule, damping):
     mrf, _ = sphere_problem(40, 2000, 4, seed=8)
     kw = dict(schedule=schedule, iterations=8, tol=0.0, damping=damping, seed=3)
@@ -301,7 +311,7 @@ def test_gpu_equals_cpu(schedule, damping):
     assert np.abs(gpu.marginals / cpu.marginals - 1.0).max() < 1e-4
 
 
-@pytest.mark.skipif(not bp_gpu.available(), reason="needs CuPy and a CUDA device")
+@pytest.mark.skipif(not gpu_available(), reason="needs CuPy and a CUDA device")
 def test_gpu_equals_cpu_from_initial_messages():
     mrf, _ = sphere_problem(40, 2000, 4, seed=8)
     start = np.random.default_rng(0).uniform(0.2, 1.0, size=(2 * len(mrf.edges), 2000))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import cli
+from intrinsym import cli, params
 
 SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
 
@@ -39,7 +39,7 @@ def test_detect_trivial_weight(tmp_path):
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "auto",
                      "--isometry-threshold", "1.0"]) == 0
     identity = json.loads((out / "run.json").read_text())["identity"]
-    assert identity["isometry"] < 1.0 and identity["weight"] == intrinsym.pipeline.NO_PARTNER_WEIGHT
+    assert identity["isometry"] < 1.0 and identity["weight"] == intrinsym.params.NO_PARTNER_WEIGHT
     p = run("detect", "--example", "-o", tmp_path / "bad", "--trivial-weight", "some")
     assert p.returncode == 2 and "expected 'auto' or a number, got 'some'" in p.stderr
     assert not (tmp_path / "bad").exists()
@@ -98,8 +98,8 @@ def test_missing_file_and_bad_parameters(tmp_path):
 
 def test_help_documents_every_option():
     text = cli.build_parser()._subparsers._group_actions[0].choices["detect"].format_help()
-    for flag, *_ in cli.MODEL_OPTIONS:
-        assert flag in text
+    for f in params.describe():
+        assert f.flag in text
     for flag in ("--preset", "--remove-trivial", "--keep-trivial", "--example", "--quiet", "--json"):
         assert flag in text
 
@@ -114,7 +114,7 @@ def test_detect_report_identity(tmp_path):
     spot = intrinsym.load(intrinsym.example_path())
     pairs = np.array(identity[0]["pairs"])
     gap = np.linalg.norm(spot.vertices[pairs[:, 0]] - spot.vertices[pairs[:, 1]], axis=1)
-    assert np.median(gap) < 0.05 * np.sqrt(intrinsym.mesh.surface_area(spot))
+    assert np.median(gap) < 0.05 * np.sqrt(intrinsym.shape.surface_area(spot))
     assert json.loads((out / "run.json").read_text())["params"]["report_identity"] is True
     # without the flag the same model lists no identity
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *sizes, "--keep-trivial"]) == 0

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from intrinsym.errors import InputError
 from intrinsym.evaluate import load_symmetry_map, marginal_scores, partial_scores
-from intrinsym.mesh import InputError
 
 
 def test_marginal_scores_by_hand():
@@ -79,7 +79,6 @@ def test_symmetry_map_errors(tmp_path, text, n, match):
 
 import scipy.sparse as sp  # noqa: E402
 
-from intrinsym import mesh as _mesh  # noqa: E402
 from intrinsym.evaluate import (  # noqa: E402
     correspondence_curve,
     load_labels,
@@ -88,6 +87,7 @@ from intrinsym.evaluate import (  # noqa: E402
     score_map,
     segmentation_scores,
 )
+from intrinsym.shape import from_arrays  # noqa: E402
 
 
 def path_graph(n=5, step=0.1):
@@ -119,7 +119,7 @@ def test_segmentation_score_by_hand():
 
 def test_score_map_on_the_mirror_shape(mirror, tmp_path):
     v, f, sym = mirror
-    shape = _mesh.from_arrays(v, f)
+    shape = from_arrays(v, f)
     sides = (v[:, 0] > 0.2).astype(int) + 2 * (v[:, 0] < -0.2)
     assert segmentation_scores(sym, sym, sides) == {1: 1.0, 2: 1.0}
     # the true map on every 10th vertex (one Dijkstra per distinct predicted vertex)
@@ -154,7 +154,7 @@ def test_partial_ground_truth_scores_only_vertices_with_an_image(mirror):
     from intrinsym.evaluate import score_marginals
 
     v, f, sym = mirror
-    shape = _mesh.from_arrays(v, f)
+    shape = from_arrays(v, f)
     part = np.abs(v[:, 0]) > 0.2
     partial = np.where(part, sym, -1)
     s = score_map(np.arange(len(v)), shape, partial)  # the identity: wrong wherever scored

@@ -13,25 +13,23 @@ import numpy as np
 import pytest
 
 from intrinsym.extract import (
+    Extraction,
     ExtractParams,
-    SourceGraph,
-    Support,
     Symmetry,
     _merge,
-    agreement,
     complete,
     consistency,
     extract,
-    fitted_vertex_map,
     grow,
     nearest_targets,
     normalise_rows,
     peaks,
     query,
     refine,
-    vertex_map,
 )
 from intrinsym.geodesics import SparseDistances
+from intrinsym.support import SourceGraph, Support
+from intrinsym.vertex_maps import agreement, fitted_vertex_map, vertex_map
 
 T, S = 40, 10
 IDENTITY = 4 * np.arange(S)
@@ -99,8 +97,9 @@ def test_peaks_threshold_and_suppression():
 
 def test_grow_recovers_the_mirror_and_the_identity():
     norm = normalise_rows(marginals())
-    assert grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.5, d_error=0.01)).tolist() == MIRROR.tolist()
-    assert grow(norm, GRAPH, TARGETS, 1, IDENTITY[1], ExtractParams(threshold=0.5, d_error=0.01)).tolist() == IDENTITY.tolist()
+    params = ExtractParams(threshold=0.5, d_error=0.01)
+    assert grow(norm, GRAPH, TARGETS, 1, MIRROR[1], params).tolist() == MIRROR.tolist()
+    assert grow(norm, GRAPH, TARGETS, 1, IDENTITY[1], params).tolist() == IDENTITY.tolist()
 
 
 def test_grow_stops_at_geodesic_error_and_threshold():
@@ -116,8 +115,9 @@ def test_grow_stops_at_geodesic_error_and_threshold():
     assert loose[3] == shifted[3]
     # a mirror peak of 0.6 passes t = 0.5 but not t = 0.75
     norm = normalise_rows(marginals(mirror_value=0.6, with_mirror=[1, 2, 3, 4]))
-    assert np.flatnonzero(grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.5, d_error=0.01)) >= 0).tolist() == [1, 2, 3, 4]
-    assert np.flatnonzero(grow(norm, GRAPH, TARGETS, 1, MIRROR[1], ExtractParams(threshold=0.75, d_error=0.01)) >= 0).tolist() == [1]
+    for threshold, grown in ((0.5, [1, 2, 3, 4]), (0.75, [1])):
+        params = ExtractParams(threshold=threshold, d_error=0.01)
+        assert np.flatnonzero(grow(norm, GRAPH, TARGETS, 1, MIRROR[1], params) >= 0).tolist() == grown
 
 
 def test_query_returns_every_part_pair_with_kinds():
@@ -136,16 +136,25 @@ def test_query_returns_every_part_pair_with_kinds():
 def test_extract_separates_identity_and_finds_the_global_mirror():
     result = extract(marginals(), GRAPH, TARGETS, ExtractParams(d_error=0.01), self_target=SELF)
     assert [s.kind for s in result.symmetries] == ["global"]
-    assert result.global_index == 0
+    assert result.global_index == 0 and result.global_symmetry is result.symmetries[0]
     assert result.symmetries[0].target.tolist() == MIRROR.tolist()
     both = extract(marginals(), GRAPH, TARGETS, ExtractParams(d_error=0.01, keep_identity=True), self_target=SELF)
     assert sorted(s.kind for s in both.symmetries) == ["global", "identity"]
 
 
+def test_extraction_global_symmetry_follows_global_index():
+    a = Symmetry(np.arange(3), np.arange(3), 0.5, 1.0, "partial")
+    b = Symmetry(np.arange(4), np.arange(4) + 1, 0.4, 1.0, "global")
+    params = ExtractParams()
+    assert Extraction([a, b], 1, params).global_symmetry is b
+    assert Extraction([a, b], -1, params).global_symmetry is None
+    assert Extraction([], -1, params).global_symmetry is None
+
+
 def test_extract_partial_symmetry_is_not_global():
     m = marginals(with_mirror=[1, 2, 3])
     result = extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01), self_target=SELF)
-    assert result.global_index == -1
+    assert result.global_index == -1 and result.global_symmetry is None
     assert [s.source.tolist() for s in result.symmetries] == [[1, 2, 3]]
     assert result.symmetries[0].kind == "partial"
     assert extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01, min_fraction=0.4), self_target=SELF).symmetries == []
@@ -281,7 +290,8 @@ def test_vertex_map_and_nearest_targets():
     mirror = next(s for s in sym if s.target.tolist() == MIRROR.tolist())
     vertex_source = np.array([0, 0, 3, -1, 9])
     target_vertex = 100 + np.arange(T)
-    assert vertex_map(mirror, vertex_source, target_vertex, S).tolist() == [100 + MIRROR[0], 100 + MIRROR[0], 100 + MIRROR[3], -1, 100 + MIRROR[9]]
+    assert vertex_map(mirror, vertex_source, target_vertex, S).tolist() == [
+        100 + MIRROR[0], 100 + MIRROR[0], 100 + MIRROR[3], -1, 100 + MIRROR[9]]
     angle = 2 * np.pi * np.arange(T) / T
     pts = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(T)]) / (2 * np.pi)
     assert nearest_targets(pts[IDENTITY] * 1.001, pts).tolist() == IDENTITY.tolist()
@@ -309,8 +319,8 @@ def plane_mirror(image_of=None):
     d = np.linalg.norm(points[:, None] - points[None], axis=2)
     edges = np.array([(a, b) for a in range(n) for b in range(a + 1, n) if abs(d[a, b] - 0.25) < 1e-9])
     rows = [np.argsort(d[i], kind="stable") for i in range(n)]
-    targets = SparseDistances(np.arange(n + 1) * n, np.concatenate(rows), np.concatenate([d[i, r] for i, r in enumerate(rows)]),
-                              float(d.max()))
+    targets = SparseDistances(np.arange(n + 1) * n, np.concatenate(rows),
+                              np.concatenate([d[i, r] for i, r in enumerate(rows)]), float(d.max()))
     cells = cKDTree(points).query(vertices + 1e-6)[1]  # ties broken towards the lower-left sample
     support = Support(np.full(len(edges), 0.25), targets, cells, cells, True, vertices, vertices)
     return Symmetry(np.arange(n), image, 1.0, 1.0, "global"), support, edges, points, truth, sample_vertex
@@ -344,25 +354,8 @@ def test_fitted_vertex_map_keeps_the_cells_where_the_fit_fails():
     assert fitted[far].tolist() == truth[far].tolist()
 
 
-def test_support_arrays_round_trip_with_and_without_vertices():
-    _, support, *_ = plane_mirror()
-    back = Support.from_arrays(support.to_arrays())
-    assert np.array_equal(back.source_vertices, support.source_vertices)
-    assert np.array_equal(back.target_vertices, support.target_vertices)
-    # self-matching: one shape, its vertices stored once
-    assert "target_vertices" not in support.to_arrays()
-    # two shapes: both stored and read back apart
-    other = dataclasses.replace(support, self_match=False, target_vertices=2.0 * support.target_vertices)
-    assert "target_vertices" in other.to_arrays()
-    back = Support.from_arrays(other.to_arrays())
-    assert np.array_equal(back.source_vertices, support.source_vertices)
-    assert np.array_equal(back.target_vertices, 2.0 * support.target_vertices)
-    old = {k: v for k, v in support.to_arrays().items() if k in Support.KEYS}
-    assert Support.from_arrays(old).source_vertices is None
-
-
-@pytest.mark.parametrize("bad", [dict(threshold=0.0), dict(d_error=0.0), dict(global_fraction=2.0), dict(min_fraction=1.5),
-                                 dict(max_count=0), dict(vertex_fit=-1.0)])
+@pytest.mark.parametrize("bad", [dict(threshold=0.0), dict(d_error=0.0), dict(global_fraction=2.0),
+                                 dict(min_fraction=1.5), dict(max_count=0), dict(vertex_fit=-1.0)])
 def test_params_validated(bad):
     with pytest.raises(ValueError):
         ExtractParams(**bad)
@@ -371,16 +364,19 @@ def test_params_validated(bad):
 def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
     """End to end on a tiny generated figure: files, query without BP, evaluate with labels."""
     import json
+    import math
+    import time
 
-    from intrinsym import cli, shapes
-    from intrinsym.extract import from_result
-    from intrinsym.pipeline import Result
+    from intrinsym import Result, cli, shapes
+    from intrinsym.extract import query_from_support
 
     figure = shapes.figure(resolution=4)
     shapes.save(figure, tmp_path / "fig.off")
     out = tmp_path / "out"
     small = ["--source", "20", "--target", "200", "--iterations", "3", "--spin-cloud", "2000", "-q"]
+    start = time.perf_counter()
     assert cli.main(["detect", str(tmp_path / "fig.off"), "-o", str(out), *small]) == 0
+    wall = time.perf_counter() - start
     listed = json.loads((out / "symmetries.json").read_text())
     vmap = np.load(out / "symmetry_map.npy")
     assert vmap.dtype == np.int64 and vmap.shape == (len(figure.vertices),)
@@ -388,21 +384,24 @@ def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
     assert [s["kind"] for s in listed].count("global") == int(vmap.max() >= 0)
     for s in listed:
         pairs = np.array(s["pairs"])
-        assert pairs.shape[1] == 2 and set(pairs[:, 0]) <= set(s["source_vertices"])
+        assert pairs.shape[1] == 2 and set(pairs[:, 0]) <= set(s["source_vertex_index"])
     result = Result.load(out)
-    assert json.loads((out / "run.json").read_text())["seconds"]["extract"] >= 0
+    # the extraction stage is timed, and took part of the run's wall time
+    seconds = json.loads((out / "run.json").read_text())["seconds"]
+    assert math.isfinite(seconds["extract"]) and 0 < seconds["extract"] < wall
 
     # the query reads the saved arrays and grows from the sample whose cell holds the vertex
     sample = 3
-    vertex = int(result.source_vertex[sample])
-    expected = from_result(result.marginals, result.edges, result.support, result.source_points,
-                           result.target_points, result.params.extraction(), source=sample, unary=result.unary)
+    vertex = int(result.source_point_vertex[sample])
+    expected = query_from_support(result.marginals, result.edges, result.support, result.source_points,
+                                  result.target_points, sample, result.params.extraction(), unary=result.unary)
     capsys.readouterr()
     assert cli.main(["query", str(out), "--vertex", str(vertex), "--json"]) == 0
     answer = json.loads(capsys.readouterr().out)
     assert answer["source_sample"] == sample
     assert [s["pairs"] for s in answer["symmetries"]] == [
-        np.column_stack([result.source_vertex[e.source], result.target_vertex[e.target]]).tolist() for e in expected]
+        np.column_stack([result.source_point_vertex[e.source], result.target_point_vertex[e.target]]).tolist()
+        for e in expected]
     assert cli.main(["query", str(out), "--vertex", str(10**6)]) == 2
 
     assert cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "fig.sym.npy"),

@@ -135,7 +135,7 @@ def test_local_distances_match_dense_dijkstra(small_sphere) -> None:
         assert np.all(d <= radius)
         inside = np.flatnonzero(ref[i] <= radius * (1 - 1e-9))
         assert set(inside) <= set(cols.tolist())
-        table.update({(i, int(j)): dj for j, dj in zip(cols, d)})
+        table.update({(i, int(j)): dj for j, dj in zip(cols, d, strict=True)})
     assert all(table[(j, i)] == dij for (i, j), dij in table.items())
 
 

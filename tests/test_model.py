@@ -4,19 +4,9 @@ import numpy as np
 import pytest
 
 from intrinsym.descriptors import eigenpairs, wave_kernel_signature, wks_energies
-from intrinsym.model import (
-    calibrated_potential,
-    descriptor_scale,
-    lambda_for_tolerance,
-    nmi_potential,
-    pairwise_dense,
-    potential_floor,
-    row_scales,
-    suppress_peaks,
-    suppress_trivial,
-    truncation_width,
-)
 from intrinsym.geodesics import SparseDistances
+from intrinsym.model import lambda_for_tolerance, pairwise_dense, suppress_peaks, suppress_trivial, truncation_width
+from intrinsym.unary import calibrated_potential, descriptor_scale, nmi_potential, potential_floor, row_scales
 
 
 def test_nmi_potential_paper_values():

@@ -8,8 +8,9 @@ import pytest
 import trimesh
 
 import intrinsym
-from intrinsym import bp, bp_gpu, extract, pipeline
-from intrinsym.mesh import Shape
+from intrinsym import bp, evaluate, pipeline, vertex_maps
+from intrinsym.shape import Shape
+from intrinsym.support import Support
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
 
@@ -21,7 +22,7 @@ def spot():
 
 @pytest.fixture(scope="module")
 def spot_result(spot):
-    return intrinsym.detect(spot, **SMALL)
+    return intrinsym.detect(spot, intrinsym.make_params(**SMALL))
 
 
 def test_result_contract(spot, spot_result, tmp_path):
@@ -29,14 +30,14 @@ def test_result_contract(spot, spot_result, tmp_path):
     s, t = 40, 400
     assert r.source_points.shape == (s, 3) and r.source_points.dtype == np.float64
     assert r.target_points.shape == (t, 3)
-    assert r.source_vertex.dtype == np.int64 and r.target_vertex.dtype == np.int64
+    assert r.source_point_vertex.dtype == np.int64 and r.target_point_vertex.dtype == np.int64
     assert r.unary.shape == (s, t) and r.unary.dtype == np.float32
     assert r.marginals.shape == (s, t) and r.marginals.dtype == np.float32
     assert np.allclose(r.marginals.sum(axis=1), 1.0, atol=1e-5)
     assert r.edges.dtype == np.int64 and r.edges.shape[1] == 2
     assert np.all(r.edges[:, 0] < r.edges[:, 1]) and r.edges.max() < s
     # samples are on the input surface: the nearest input vertex is close
-    gap = np.linalg.norm(spot.vertices[r.source_vertex] - r.source_points, axis=1)
+    gap = np.linalg.norm(spot.vertices[r.source_point_vertex] - r.source_points, axis=1)
     assert gap.max() < 0.05 * np.ptp(spot.vertices, axis=0).max()
     # every sample has a neighbour, and the graph is connected-ish (each degree >= 1)
     assert np.bincount(r.edges.ravel(), minlength=s).min() >= 1
@@ -46,7 +47,7 @@ def test_result_contract(spot, spot_result, tmp_path):
     for key in ("params", "sizes", "seconds", "bp", "versions", "resolved"):
         assert key in run
     assert run["bp"]["iterations"] >= 1 and isinstance(run["bp"]["converged"], bool)
-    assert run["bp"]["backend"] == ("gpu" if bp_gpu.available() else "cpu")
+    assert run["bp"]["backend"] == ("gpu" if bp.gpu_available() else "cpu")
     # the stored MRF gives back the stored marginals
     p = r.params
     again_bp = bp.belief_propagation(r.mrf(), p.schedule, p.iterations, p.bp_tol, p.damping, p.seed, backend=p.backend)
@@ -56,68 +57,77 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert np.array_equal(again.marginals, r.marginals)
     assert again.params == r.params
     with np.load(out / "result.npz") as z:
-        # one shape: its input vertices are stored once, as source_vertices
-        assert sorted(z.files) == sorted(pipeline.Result.ARRAYS + pipeline.extract.Support.KEYS
-                                         + ("source_vertices", "global_map"))
-    assert np.array_equal(again.support.target_vertices, r.support.target_vertices)
+        # one shape: its input vertices are stored once, as source_mesh_vertices
+        assert sorted(z.files) == sorted(intrinsym.Result.ARRAYS + Support.KEYS
+                                         + ("source_mesh_vertices", "zoomout_map"))
+    assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
+    assert json.loads((out / "run.json").read_text())["format_version"] == 2
+
+
+def test_global_map_is_spots_reflection(spot, spot_result):
+    # independent truth: spot is mirror-symmetric, and its best reflection gives the map
+    truth, residual = evaluate.extrinsic_mirror(spot.vertices)
+    assert np.median(residual) < 1e-6 * np.ptp(spot.vertices)
+    scores = evaluate.score_map(spot_result.symmetry_map(), spot, truth)
+    assert scores.within(0.10) >= 0.9 and scores.mean_error < 0.05
 
 
 def test_global_map_by_seeded_zoomout(spot, spot_result, tmp_path):
     r = spot_result
-    assert r.extraction.global_index >= 0 and r.info["zoomout"]["used"]
-    assert r.info["zoomout"]["agreement"] >= pipeline.ZOOMOUT_AGREEMENT
-    assert r.global_map.shape == (len(spot.vertices),) and r.global_map.dtype == np.int64
-    assert r.global_map.min() >= 0 and np.mean(r.global_map == np.arange(len(spot.vertices))) < 0.05
+    assert r.extraction.global_index >= 0 and r.info.zoomout.used
+    assert r.info.zoomout.agreement >= intrinsym.params.ZOOMOUT_AGREEMENT
+    assert r.zoomout_map.shape == (len(spot.vertices),) and r.zoomout_map.dtype == np.int64
+    assert r.zoomout_map.min() >= 0 and np.mean(r.zoomout_map == np.arange(len(spot.vertices))) < 0.05
     out = r.save(tmp_path / "zoomout")
-    assert np.array_equal(np.load(out / "symmetry_map.npy"), r.global_map)
-    assert np.array_equal(pipeline.Result.load(out).global_map, r.global_map)
+    assert np.array_equal(np.load(out / "symmetry_map.npy"), r.zoomout_map)
+    assert np.array_equal(intrinsym.Result.load(out).zoomout_map, r.zoomout_map)
     # without it, symmetry_map.npy is the extraction's map of the same symmetry
-    plain = dataclasses.replace(r, global_map=None).save(tmp_path / "plain")
+    plain = dataclasses.replace(r, zoomout_map=None).save(tmp_path / "plain")
     g = r.extraction.symmetries[r.extraction.global_index]
-    cells = pipeline.extract.vertex_map(g, r.support.vertex_source, r.target_vertex, len(r.marginals))
+    cells = vertex_maps.vertex_map(g, r.support.vertex_source, r.target_point_vertex, len(r.marginals))
     assert np.array_equal(np.load(plain / "symmetry_map.npy"), cells)
-    assert pipeline.Result.load(plain).global_map is None
+    assert intrinsym.Result.load(plain).zoomout_map is None
     # the seeded map lands where the extraction's does (within a sample spacing, ~0.16)
-    gap = np.linalg.norm(spot.vertices[r.global_map] - spot.vertices[cells], axis=1) / r.info["resolved"]["scale"]
+    gap = np.linalg.norm(spot.vertices[r.zoomout_map] - spot.vertices[cells], axis=1) / r.info.resolved.scale
     assert np.median(gap) < 0.1
 
 
 def test_deterministic_for_a_seed(spot, spot_result):
-    again = intrinsym.detect(spot, **SMALL)
+    again = intrinsym.detect(spot, intrinsym.make_params(**SMALL))
     assert np.array_equal(again.marginals, spot_result.marginals)
-    other = intrinsym.detect(spot, seed=1, **SMALL)
-    assert not np.array_equal(other.source_vertex, spot_result.source_vertex)
+    other = intrinsym.detect(spot, intrinsym.make_params(seed=1, **SMALL))
+    assert not np.array_equal(other.source_point_vertex, spot_result.source_point_vertex)
 
 
 def test_residual_schedule_end_to_end(spot, spot_result):
-    res = intrinsym.detect(spot, schedule="residual", **dict(SMALL, iterations=100))
-    colour = intrinsym.detect(spot, **dict(SMALL, iterations=100))
-    assert res.info["bp"]["converged"] and colour.info["bp"]["converged"]
-    assert res.info["bp"]["message_updates"] < colour.info["bp"]["message_updates"]
+    res = intrinsym.detect(spot, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
+    colour = intrinsym.detect(spot, intrinsym.make_params(**dict(SMALL, iterations=100)))
+    assert res.info.bp.converged and colour.info.bp.converged
+    assert res.info.bp.message_updates < colour.info.bp.message_updates
     assert np.abs(res.marginals - colour.marginals).max() < 1e-3 * colour.marginals.max()
 
 
 def test_scale_free(spot, spot_result):
     big = Shape(spot.vertices * 1000.0 + 5.0, spot.faces)
-    r = intrinsym.detect(big, **SMALL)
-    assert np.array_equal(r.source_vertex, spot_result.source_vertex)
-    assert np.array_equal(r.target_vertex, spot_result.target_vertex)
+    r = intrinsym.detect(big, intrinsym.make_params(**SMALL))
+    assert np.array_equal(r.source_point_vertex, spot_result.source_point_vertex)
+    assert np.array_equal(r.target_point_vertex, spot_result.target_point_vertex)
     assert np.abs(r.marginals - spot_result.marginals).max() < 1e-4
     assert np.allclose(r.source_points, spot_result.source_points * 1000.0 + 5.0)
 
 
 def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
-    kept = intrinsym.detect(spot, remove_trivial=False, **SMALL)
+    kept = intrinsym.detect(spot, intrinsym.make_params(remove_trivial=False, **SMALL))
     removed = spot_result  # the default ("auto") removes it: spot's mirror is a near-isometry
-    identity = removed.info["identity"]
-    assert identity["weight"] == 0.0 and identity["isometry"] >= identity["threshold"], identity
-    weighted = intrinsym.detect(spot, trivial_weight=0.7, **SMALL)
-    assert np.array_equal(kept.target_vertex, removed.target_vertex)
-    floor = np.float32(removed.info["resolved"]["unary_floor"])
+    identity = removed.info.identity
+    assert identity.weight == 0.0 and identity.isometry >= identity.threshold, identity
+    weighted = intrinsym.detect(spot, intrinsym.make_params(trivial_weight=0.7, **SMALL))
+    assert np.array_equal(kept.target_point_vertex, removed.target_point_vertex)
+    floor = np.float32(removed.info.resolved.unary_floor)
     # Euclidean distance is a lower bound of the geodesic one: every target this close
     # to its source point lies inside the trivial radius (0.08 sqrt(area); tested at
     # 0.05, where geodesic and Euclidean distance agree on this mesh).
-    area = intrinsym.mesh.surface_area(spot)
+    area = intrinsym.shape.surface_area(spot)
     d = np.linalg.norm(kept.source_points[:, None] - kept.target_points[None], axis=2) / np.sqrt(area)
     inside = d < 0.05
     assert inside.sum() >= len(d)
@@ -141,30 +151,31 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
 
 
 def test_paper_preset():
-    p = pipeline.make_params("paper")
+    p = intrinsym.params.make_params("paper")
     assert (p.rho, p.gamma, p.schedule, p.iterations, p.remove_trivial) == (0.4, 0.01, "serial", 100, False)
-    assert pipeline.make_params("paper", remove_trivial=True).remove_trivial
-    assert p.trivial_weight == 0.0 and pipeline.make_params().trivial_weight == "auto"
+    assert intrinsym.params.make_params("paper", remove_trivial=True).remove_trivial
+    assert p.trivial_weight == 0.0 and intrinsym.params.make_params().trivial_weight == "auto"
     assert not p.unary_seeds and not p.extraction().unary_seeds
-    assert pipeline.make_params().extraction().unary_seeds
-    assert p.extraction().vertex_fit == 0 and pipeline.make_params(vertex_fit=0.5).extraction().vertex_fit == 0.5
-    assert not p.zoomout and pipeline.make_params().zoomout
+    assert intrinsym.params.make_params().extraction().unary_seeds
+    assert p.extraction().vertex_fit == 0
+    assert intrinsym.params.make_params(vertex_fit=0.5).extraction().vertex_fit == 0.5
+    assert not p.zoomout and intrinsym.params.make_params().zoomout
     with pytest.raises(intrinsym.ParameterError, match="zoomout_seed"):
-        pipeline.make_params(zoomout_seed=60)
+        intrinsym.params.make_params(zoomout_seed=60)
     with pytest.raises(intrinsym.ParameterError, match="unknown parameter"):
-        pipeline.make_params(rhoo=0.3)
+        intrinsym.params.make_params(rhoo=0.3)
     with pytest.raises(intrinsym.ParameterError, match="rho"):
-        pipeline.make_params(rho=1.5)
+        intrinsym.params.make_params(rho=1.5)
     for bad in (-0.1, 1.0, "sometimes", None):
         with pytest.raises(intrinsym.ParameterError, match="trivial_weight"):
-            pipeline.make_params(trivial_weight=bad)
+            intrinsym.params.make_params(trivial_weight=bad)
     for bad in (-0.1, 1.5):
         with pytest.raises(intrinsym.ParameterError, match="isometry_threshold"):
-            pipeline.make_params(isometry_threshold=bad)
+            intrinsym.params.make_params(isometry_threshold=bad)
 
 
 def test_point_cloud_input(spot):
-    r = intrinsym.detect((spot.vertices, None), n_source=30, n_target=300, iterations=5)
+    r = intrinsym.detect((spot.vertices, None), intrinsym.make_params(n_source=30, n_target=300, iterations=5))
     assert r.marginals.shape == (30, 300)
     assert np.allclose(r.marginals.sum(axis=1), 1.0, atol=1e-5)
 
@@ -176,7 +187,8 @@ def bumpy_shape() -> Shape:
     rng = np.random.default_rng(3)
     for c in rng.normal(size=(6, 3)):
         c /= np.linalg.norm(c)
-        v += 0.25 * np.exp(-np.sum((sphere.vertices - c) ** 2, axis=1) / 0.15)[:, None] * sphere.vertices * rng.uniform(0.5, 1.5)
+        bump = np.exp(-np.sum((sphere.vertices - c) ** 2, axis=1) / 0.15)[:, None]
+        v += 0.25 * bump * sphere.vertices * rng.uniform(0.5, 1.5)
     return Shape(v * [1.0, 1.4, 0.8], np.asarray(sphere.faces))
 
 
@@ -184,12 +196,13 @@ def test_match_two_shapes(tmp_path):
     a = bumpy_shape()
     rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     moved = Shape(a.vertices @ rot.T * 3.0, a.faces)
-    r = intrinsym.match(a, moved, n_source=30, n_target=1500, spin_radius=0.2, spin_cloud=20000, iterations=10)
+    params = intrinsym.make_params(n_source=30, n_target=1500, spin_radius=0.2, spin_cloud=20000, iterations=10)
+    r = intrinsym.match(a, moved, params)
     assert r.marginals.shape == (30, 1500)
-    assert r.global_map is None and "zoomout" not in r.info
-    assert r.info["mode"] == "match"
+    assert r.zoomout_map is None and r.info.zoomout is None
+    assert r.info.mode == "match"
     # two BP passes by default in match mode; the second's unary lacks the first's argmax
-    assert r.pass_marginals.shape == (1, 30, 1500) and len(r.info["bp"]["passes"]) == 1
+    assert r.pass_marginals.shape == (1, 30, 1500) and len(r.info.bp.passes) == 1
     ((second, second_unary),) = r.passes
     first = r.marginals.argmax(axis=1)
     assert np.array_equal(second, r.pass_marginals[0])
@@ -197,15 +210,15 @@ def test_match_two_shapes(tmp_path):
     # the unaries derived from the saved arrays are those the run used: the extraction
     # from the loaded result is the run's own
     again = intrinsym.Result.load(r.save(tmp_path / "out"))
-    assert all(np.array_equal(x, y) for pair in zip(again.passes, r.passes) for x, y in zip(*pair))
-    redone = extract.from_result(again.marginals, again.edges, again.support, again.source_points,
-                                 again.target_points, again.params.extraction(), unary=again.unary,
-                                 passes=again.passes)
+    assert all(np.array_equal(x, y) for pair in zip(again.passes, r.passes, strict=True)
+               for x, y in zip(*pair, strict=True))
+    redone = pipeline.extract_result(again)
     assert [(s.source.tolist(), s.target.tolist()) for s in redone.symmetries] == [
         (s.source.tolist(), s.target.tolist()) for s in r.extraction.symmetries]
-    assert intrinsym.Result.load(intrinsym.detect(a, **SMALL).save(tmp_path / "one")).passes == []
+    one = intrinsym.detect(a, intrinsym.make_params(**SMALL)).save(tmp_path / "one")
+    assert intrinsym.Result.load(one).passes == []
     # a rotated, scaled copy: the MAP target of most source points is its own image
-    image = a.vertices[r.source_vertex] @ rot.T * 3.0
+    image = a.vertices[r.source_point_vertex] @ rot.T * 3.0
     best = r.target_points[r.marginals.argmax(axis=1)]
     err = np.linalg.norm(best - image, axis=1) / (3.0 * np.ptp(a.vertices, axis=0).max())
     assert np.mean(err < 0.1) >= 0.75
@@ -220,7 +233,7 @@ def horse_sides(result: intrinsym.Result, reference: np.ndarray) -> list[tuple[f
     off = np.abs(reference[:, 0] - centre) > 0.05 * np.ptp(reference[:, 0])
     out = []
     for sym in result.extraction.symmetries:
-        a, b = result.source_vertex[sym.source], result.target_vertex[sym.target]
+        a, b = result.source_point_vertex[sym.source], result.target_point_vertex[sym.target]
         near = np.linalg.norm(reference[b] - reference[a], axis=1) < np.linalg.norm(reference[b] - mirrored[a], axis=1)
         out.append((len(sym.source) / len(result.marginals), float(near[off[a]].mean())))
     return out
@@ -233,7 +246,8 @@ def test_two_passes_find_the_identity_and_the_swap_of_two_horse_frames():
 
     frames = [shared(f"sumner_horse/horse-0{k}.obj") for k in (1, 3)]
     reference = np.asarray(intrinsym.load(shared("sumner_horse/horse_ref.obj")).vertices)
-    sides = {passes: horse_sides(intrinsym.match(*frames, n_source=150, n_target=1500, passes=passes), reference)
+    sizes = dict(n_source=150, n_target=1500)
+    sides = {passes: horse_sides(intrinsym.match(*frames, intrinsym.make_params(**sizes, passes=passes)), reference)
              for passes in (None, 1)}
     for passes, found in sides.items():
         wide = [side for size, side in found if size >= 0.5]

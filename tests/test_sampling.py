@@ -95,7 +95,7 @@ def test_area_uniform_points_follow_area() -> None:
     in_first = pts[face == 0]
     np.testing.assert_allclose(in_first.mean(axis=0), v[f[0]].mean(axis=0), atol=0.01)
     again = area_uniform_points(v, f, n, seed=0)
-    assert all(np.array_equal(a, b) for a, b in zip(again, (pts, face, bary)))
+    assert all(np.array_equal(a, b) for a, b in zip(again, (pts, face, bary), strict=True))
 
 
 def on_some_face(points: np.ndarray, v: np.ndarray, f: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ def edge_change(vertices, faces, perm):
 
 def label_permutation(labels, perm):
     """The label mapping induced by a vertex map, asserting it is well defined."""
-    pairs = {(int(a), int(b)) for a, b in zip(labels, labels[perm])}
+    pairs = {(int(a), int(b)) for a, b in zip(labels, labels[perm], strict=True)}
     mapping = dict(pairs)
     assert len(mapping) == len(pairs), "a vertex map splits a labelled part"
     return mapping

@@ -5,15 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from conftest import shared
 from scipy.spatial import cKDTree
 
-from intrinsym import evaluate, mesh, shapes, spectral
+from conftest import shared
+from intrinsym import evaluate, shapes, spectral
+from intrinsym.io import load
+from intrinsym.shape import clean, from_arrays
 
 
 def best_score(predicted, vertices, faces, maps) -> evaluate.MapScores:
     """The score of ``predicted`` against the ground-truth map it comes closest to."""
-    shape = mesh.from_arrays(vertices, faces)
+    shape = from_arrays(vertices, faces)
     return max((evaluate.score_map(predicted, shape, m) for m in maps), key=lambda s: s.within(0.05))
 
 
@@ -108,9 +110,9 @@ def test_spectral_symmetry_checks_sizes(mirror):
 
 def test_spectral_symmetry_on_tosca_wolf():
     path = shared("tosca_sym/wolf0.off")
-    shape = mesh.load(path)
+    shape = load(path)
     sym = evaluate.load_symmetry_map(path.with_name("wolf.sym"), len(shape.vertices))
-    cleaned, vertex_map = mesh.clean(shape)
+    cleaned, vertex_map = clean(shape)
     assert len(cleaned.vertices) == len(shape.vertices) and np.array_equal(vertex_map, np.arange(len(sym)))
     image = spectral.spectral_symmetry(cleaned.vertices, cleaned.faces)
     assert evaluate.score_map(image, shape, sym).within(0.10) > 0.95
@@ -156,7 +158,7 @@ def test_seeded_symmetry_keeps_the_seeded_one_of_several_symmetries():
     for flip in ([1, 0, 0], [0, 1, 0], [1, 1, 0], [1, 1, 1]):
         truth = cKDTree(v).query(v * (1 - 2 * np.array(flip)))[1]
         image = spectral.seeded_symmetry(v, evecs, source, truth[source], k_seed=6, n_final=30)
-        assert evaluate.score_map(image, mesh.from_arrays(v, sphere.faces), truth).within(0.05) > 0.99
+        assert evaluate.score_map(image, from_arrays(v, sphere.faces), truth).within(0.05) > 0.99
 
 
 def test_seeded_map_between_two_shapes_recovers_a_vertex_permutation(mirror):

@@ -4,22 +4,19 @@ import dataclasses
 
 import numpy as np
 import pytest
-import trimesh
 
 import intrinsym
-from intrinsym import evaluate, geodesics, mesh, model, pipeline, scores, shapes
-from intrinsym.mesh import Shape
-
-from conftest import shared
+from intrinsym import evaluate, geodesics, model, shapes
+from intrinsym.shape import Shape, surface_area
 
 SMALL = dict(n_source=40, n_target=600, spin_cloud=6000, iterations=3)
 
 
 def test_paper_preset_keeps_the_papers_unary():
-    p = pipeline.make_params("paper")
+    p = intrinsym.params.make_params("paper")
     assert (p.unary, p.potential, p.gamma, p.rho, p.schedule, p.iterations, p.remove_trivial) == (
         "spin", "paper", 0.01, 0.4, "serial", 100, False)
-    assert pipeline.Params().unary != "spin"
+    assert intrinsym.params.Params().unary != "spin"
 
 
 @pytest.mark.parametrize("bad, match", [
@@ -34,7 +31,7 @@ def test_paper_preset_keeps_the_papers_unary():
 ])
 def test_bad_unary_parameters(bad, match):
     with pytest.raises(intrinsym.ParameterError, match=match):
-        pipeline.make_params(**bad)
+        intrinsym.params.make_params(**bad)
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +44,10 @@ def mirror_results():
     # removed: at this size "auto" keeps it for WKS alone (its argmax keeps 0.83 of the
     # edges, mixing the mirror and the front-back symmetry), which would add the
     # identity's band to the unary under test
-    out = {name: intrinsym.detect(Shape(v, f), unary=name, calibration="both", trivial_weight=0.0, **SMALL)
+    out = {name: intrinsym.detect(Shape(v, f), intrinsym.make_params(unary=name, calibration="both",
+                                                                     trivial_weight=0.0, **SMALL))
            for name in ("wks", "wks*spin")}
-    out["paper"] = intrinsym.detect(Shape(v, f), preset="paper", **SMALL)
+    out["paper"] = intrinsym.detect(Shape(v, f), intrinsym.make_params("paper", **SMALL))
     return Shape(v, f), sym, out
 
 
@@ -58,11 +56,11 @@ def test_calibrated_unaries_peak_at_the_mirror_and_nowhere_else(mirror_results):
     # intrinsic descriptor can tell apart: the argmax may pick that image, but the true
     # mirror must carry a peak and random decoys must not, unlike the paper's flat unary.
     shape, sym, results = mirror_results
-    score = {k: evaluate.score_marginals(r.unary, r.source_vertex, r.target_vertex, shape, sym)
+    score = {k: evaluate.score_marginals(r.unary, r.source_point_vertex, r.target_point_vertex, shape, sym)
              for k, r in results.items()}
     for name in ("wks", "wks*spin"):
         r, s = results[name], score[name]
-        assert r.info["resolved"]["unary_floor"] == pipeline.Params().unary_floor
+        assert r.info.resolved.unary_floor == intrinsym.params.Params().unary_floor
         assert r.unary.min() >= np.float32(1e-3) and r.unary.max() <= 1.0
         # breadth 0.03 of 600 targets is 18, about the peak of one true image at this
         # sampling (the offset calibration widens WKS alone to 0.022 here)
@@ -75,56 +73,7 @@ def test_paper_unary_is_eq5_of_spin_nmi(mirror_results):
     u = results["paper"].unary
     assert u.min() >= np.float32(model.potential_floor(0.01)) and u.max() <= 1.0
     # The identity is kept: every source sample's own target is at (or near) its row maximum.
-    assert results["paper"].info["resolved"]["unary_floor"] == pytest.approx(1 / 101)
-
-
-def test_score_table_markdown():
-    row = {"shape": "cat1", "config": "wks", "iterations": 4,
-           "unary": dict(mirror_hit=0.5, peak_recall=0.25, decoy_recall=0.0, breadth=0.125, n_scored=3),
-           "bp": dict(mirror_hit=1.0, peak_recall=1.0, decoy_recall=0.0, breadth=0.0625, n_scored=3),
-           "map": {"within_0.05": 0.5, "within_0.10": 0.75, "mean_error": 0.03125}}
-    mirrored = dict(row, shape="cow", mirror_residual=0.0001)
-    lines = scores.markdown([row, mirrored]).splitlines()
-    assert lines[0].startswith("| shape | config | unary mirror_hit | bp mirror_hit |")
-    assert lines[0].endswith("| BP iterations | map within 0.05 | map within 0.10 | map mean error |")
-    assert lines[2] == ("| cat1 | `wks` | 0.500 | 1.000 | 0.250 | 1.000 | 0.000 | 0.000 | 0.125 | 0.062 | 4 "
-                        "| 0.500 | 0.750 | 0.031 |")
-    assert lines[3].startswith("| cow (reflection, residual 0.0001) | `wks` |")
-    assert scores.config_params("paper") == ("paper", {})
-    assert scores.config_params("wks*spin") == ("default", {"unary": "wks*spin"})
-
-
-def test_score_table_bad_data_is_one_line_exit_2(tmp_path, capsys):
-    assert scores.main(["--data", str(tmp_path), "--shapes", "cat1", "--config", "wks"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "cat1.off" in err[0]
-
-
-@pytest.mark.slow
-def test_wks_spin_scores_on_tosca_wolf(tmp_path):
-    data = shared("tosca_sym/wolf1.off").parent
-    out = tmp_path / "table.md"
-    assert scores.main(["--data", str(data), "--shapes", "wolf1", "--config", "wks*spin", "--source", "100",
-                        "--target", "1000", "--iterations", "5", "-o", str(out)]) == 0
-    row = __import__("json").loads(out.with_suffix(".json").read_text())[0]
-    assert row["unary"]["mirror_hit"] >= 0.9 and row["bp"]["mirror_hit"] >= 0.9
-    assert row["bp"]["decoy_recall"] <= 0.05
-    assert row["map"]["within_0.10"] >= 0.9
-
-
-def test_score_table_against_a_reflection(tmp_path):
-    # the generated mirror shape has no symmetry file: its ground truth is its reflection
-    from conftest import mirror_shape
-
-    v, f, _ = mirror_shape()
-    path = tmp_path / "bent.off"
-    trimesh.Trimesh(v, f, process=False).export(path)
-    out = tmp_path / "table.md"
-    assert scores.main(["--mirror", str(path), "--config", "default", "--source", "60", "--target", "600",
-                        "--iterations", "10", "-o", str(out)]) == 0
-    row = __import__("json").loads(out.with_suffix(".json").read_text())[0]
-    assert row["shape"] == "bent" and row["mirror_residual"] < 1e-6
-    assert row["bp"]["mirror_hit"] >= 0.9 and row["map"]["within_0.10"] >= 0.9
+    assert results["paper"].info.resolved.unary_floor == pytest.approx(1 / 101)
 
 
 # --------------------------------------------------------------------------- partial symmetry
@@ -136,8 +85,8 @@ NEAR = 0.10  # sqrt(area) units, as in evaluate
 def partial_scores(g, r):
     """Limb hit, the peak masses on and off the limbs (:func:`evaluate.partial_scores`),
     and the largest share of off-limb samples in an extracted symmetry."""
-    p = evaluate.partial_scores(g.vertices, g.faces, g.labels, g.symmetries[0], r.marginals, r.source_vertex,
-                                r.target_vertex, NEAR)
+    p = evaluate.partial_scores(g.vertices, g.faces, g.labels, g.symmetries[0], r.marginals, r.source_point_vertex,
+                                r.target_point_vertex, NEAR)
     return p.limb_hit, p.limb_mass, p.off_mass, max((p.off[s.source].sum() / p.off.sum()
                                                      for s in r.extraction.symmetries), default=0.0)
 
@@ -154,7 +103,7 @@ def test_spin_unary_sees_the_partial_symmetry(partial_shape):
     # best non-local match lies on the other limb at its true image, and an off-limb
     # point has no concentrated match anywhere.
     g = partial_shape
-    r = intrinsym.detect(Shape(g.vertices, g.faces), unary="spin", iterations=1, **PARTIAL)
+    r = intrinsym.detect(Shape(g.vertices, g.faces), intrinsym.make_params(unary="spin", iterations=1, **PARTIAL))
     hit, _, off_mass, _ = partial_scores(g, dataclasses.replace(r, marginals=r.unary))
     assert hit >= 0.9, hit
     assert np.median(off_mass) < 0.1 and off_mass.max() < 0.2, off_mass
@@ -163,13 +112,13 @@ def test_spin_unary_sees_the_partial_symmetry(partial_shape):
 def _images_kept(result: intrinsym.Result, star: shapes.GeneratedShape) -> float:
     """Share of (source sample, rotation of the star) pairs whose true image has a target
     within 0.05 of it (units of sqrt(area)) at >= half the row maximum of the unary."""
-    area = mesh.surface_area(Shape(star.vertices, star.faces))
+    area = surface_area(Shape(star.vertices, star.faces))
     graph = geodesics.surface_graph(star.vertices / np.sqrt(area), star.faces)
-    near = geodesics.distances_from(graph, result.target_vertex, limit=0.05)  # (T, N)
+    near = geodesics.distances_from(graph, result.target_point_vertex, limit=0.05)  # (T, N)
     row = result.unary / result.unary.max(axis=1, keepdims=True)
     kept = []
     for g in star.symmetries[1:5]:  # the four non-trivial rotations
-        close = np.isfinite(near[:, g[result.source_vertex]]).T  # (S, T)
+        close = np.isfinite(near[:, g[result.source_point_vertex]]).T  # (S, T)
         kept.append(np.where(close, row, 0).max(axis=1) >= 0.5)
     return float(np.mean(kept))
 
@@ -182,7 +131,7 @@ def test_offset_calibration_keeps_every_image_of_a_five_fold_star(mode):
     # sampling offset, and the true images keep their potential.
     star = shapes.star(5)
     shape = Shape(star.vertices, star.faces)
-    run = intrinsym.detect if mode == "detect" else lambda s, **kw: intrinsym.match(s, s, **kw)
+    run = intrinsym.detect if mode == "detect" else lambda s, **kw: intrinsym.match(s, s, intrinsym.make_params(**kw))
     kept = {c: _images_kept(run(shape, calibration=c, eigenpairs=30, **dict(SMALL, iterations=1)), star)
             for c in ("both", "descriptor")}
     assert kept["both"] >= 0.6 and kept["descriptor"] <= 0.4, kept
@@ -196,15 +145,16 @@ def test_local_calibration_keeps_every_other_vertex_of_the_cuboctahedron():
     cubo = shapes.cuboctahedron()
     v = cubo.vertices
     corners = np.flatnonzero(np.isclose(np.sort(np.abs(v), axis=1), [0.0, 1.0, 1.0]).all(axis=1))
-    graph = geodesics.surface_graph(v / np.sqrt(mesh.surface_area(Shape(v, cubo.faces))), cubo.faces)
+    graph = geodesics.surface_graph(v / np.sqrt(surface_area(Shape(v, cubo.faces))), cubo.faces)
     to_corner = geodesics.distances_from(graph, corners)
     kept = {}
     for calibration in ("both", "local"):
-        r = intrinsym.detect(Shape(v, cubo.faces), n_source=60, n_target=600, calibration=calibration,
-                             iterations=1, eigenpairs=40, spin_cloud=10000)
+        params = intrinsym.make_params(n_source=60, n_target=600, calibration=calibration, iterations=1,
+                                       eigenpairs=40, spin_cloud=10000)
+        r = intrinsym.detect(Shape(v, cubo.faces), params)
         row = r.unary / r.unary.max(axis=1, keepdims=True)
-        samples = np.argmin(to_corner[:, r.source_vertex], axis=1)
-        kept[calibration] = np.mean([row[samples[i], to_corner[j, r.target_vertex] <= 0.1].max() >= 0.5
+        samples = np.argmin(to_corner[:, r.source_point_vertex], axis=1)
+        kept[calibration] = np.mean([row[samples[i], to_corner[j, r.target_point_vertex] <= 0.1].max() >= 0.5
                                      for i in range(12) for j in range(12) if j != i])
     assert kept["local"] >= 0.95 and kept["both"] <= 0.8, kept
 
@@ -219,11 +169,11 @@ def test_the_weighted_identity_keeps_off_limb_points_home_and_limbs_on_each_othe
     # either way.)
     g = partial_shape
     size = dict(PARTIAL, n_source=150, n_target=2000)
-    removed, weighted = (intrinsym.detect(Shape(g.vertices, g.faces), trivial_weight=w, **size)
+    removed, weighted = (intrinsym.detect(Shape(g.vertices, g.faces), intrinsym.make_params(trivial_weight=w, **size))
                          for w in (0.0, "auto"))
     # "auto" sees that the removed identity's BP map is no near-isometry and keeps it
-    identity = weighted.info["identity"]
-    assert identity["isometry"] < identity["threshold"] and identity["weight"] == pipeline.NO_PARTNER_WEIGHT
+    identity = weighted.info.identity
+    assert identity.isometry < identity.threshold and identity.weight == intrinsym.params.NO_PARTNER_WEIGHT
     assert weighted.extraction.params.no_partner and not removed.extraction.params.no_partner
     hit_removed, _, off_removed, body_removed = partial_scores(g, removed)
     hit, _, off, body = partial_scores(g, weighted)

@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import sphere_result
 from matplotlib.image import imread
+from scipy.spatial import cKDTree
 
-from intrinsym import viewer
+from conftest import sphere_result
+from intrinsym import Result, viewer, viz
 
 CHROMIUM = Path("/usr/bin/chromium")
 
@@ -29,17 +30,35 @@ def test_pack_roundtrip_and_row_quantisation():
 
 
 def test_part_masks_mark_source_and_image_bits():
-    masks = viewer.part_masks([{"source_vertices": [0, 1], "target_vertices": [1, 3]}], 5)
-    assert masks.tolist() == [[1, 3, 0, 2, 0]]
+    masks = viewer.part_masks([{"source_vertex_index": [0, 1], "target_vertex_index": [1, 3]},
+                               {"source_vertices": [0, 1], "target_vertices": [1, 3]}], 5)  # format version 1
+    assert masks.tolist() == [[1, 3, 0, 2, 0]] * 2
+
+
+def test_best_symmetry_is_the_global_one_else_the_best_scoring():
+    assert viewer.best_symmetry([]) == -1
+    assert viewer.best_symmetry([{"kind": "partial", "score": 0.9}, {"kind": "global", "score": 0.5}]) == 1
+    ranked = [{"kind": "identity", "score": 1.0}, {"kind": "partial", "score": 0.2}, {"kind": "partial", "score": 0.3}]
+    assert viewer.best_symmetry(ranked) == 2
+    assert viewer.best_symmetry(ranked[:1]) == 0
+    # The best takes the last listed place when it ranks below the listed ones.
+    many = [{"kind": "partial", "score": 0.9 - 0.01 * i} for i in range(viewer.MAX_SYMMETRIES + 5)]
+    many[-1]["kind"] = "global"
+    indices, best = viewer.shown_symmetries(many)
+    assert len(indices) == viewer.MAX_SYMMETRIES and indices[best] == len(many) - 1 and best == len(indices) - 1
+    assert viewer.shown_symmetries(many[:3]) == ([0, 1, 2], 0)
+    assert viewer.shown_symmetries([]) == ([], -1)
+
+
+def _page_data(html: Path) -> dict:
+    return json.loads(html.read_text().split('id="data">', 1)[1].split("</script>", 1)[0])
 
 
 def test_payload_interpolates_the_marginal_like_the_figures(tmp_path):
     out, v = sphere_result(tmp_path)
-    html = viewer.write(out, tmp_path / "v.html")
-    text = html.read_text()
-    data = json.loads(text.split('id="data">', 1)[1].split("</script>", 1)[0])
+    data = _page_data(viewer.write(out, tmp_path / "v.html"))
     assert data["n_source"] == len(range(0, len(v), 16)) and data["n_target"] == len(v)
-    assert data["symmetries"] == [] and "absent" in data["symmetries_note"]
+    assert data["symmetries"] == [] and "absent" in data["symmetries_note"] and data["initial_symmetry"] == -1
     marg = unpack(data["marginals"], np.uint8).reshape(data["n_source"], data["n_target"])
     idx = unpack(data["weight_index"], np.uint16).reshape(len(v), data["k"])
     w = unpack(data["weight_value"], np.uint8).reshape(len(v), data["k"])
@@ -49,7 +68,50 @@ def test_payload_interpolates_the_marginal_like_the_figures(tmp_path):
     assert np.allclose(unpack(data["positions"], np.float32).reshape(-1, 3), v, atol=1e-6)
 
 
-def _start_page(html: Path):
+def _make_telling(out: Path, winner: int) -> None:
+    """Give every source sample but ``winner`` its top marginal at itself (a trivial
+    match), so that ``winner`` is the most telling sample (its top is at its antipode)."""
+    result = Result.load(out)
+    others = np.flatnonzero(np.arange(len(result.marginals)) != winner)
+    result.marginals[others, result.source_point_vertex[others]] = 2.0
+    result.save(out)
+
+
+def _symmetries(out: Path, v: np.ndarray) -> None:
+    """A better-scoring partial symmetry (y halves) ranked before the global one: the
+    reflection x -> -x, its pairs every 8th vertex with x > 0.2 and its mirror image."""
+    _, mirror = cKDTree(v).query(v * [-1, 1, 1])
+
+    def record(kind, score, axis):
+        part = np.flatnonzero(v[:, axis] > 0.2)
+        return {"kind": kind, "score": score, "pairs": np.column_stack([part, mirror[part]])[::8].tolist(),
+                "source_vertex_index": part.tolist(), "target_vertex_index": np.flatnonzero(v[:, axis] < -0.2).tolist()}
+    (out / "symmetries.json").write_text(json.dumps([record("partial", 0.9, 1), record("global", 0.5, 0)]))
+
+
+def test_page_opens_on_the_best_symmetry_and_the_most_telling_sample(tmp_path):
+    out, v = sphere_result(tmp_path)
+    _make_telling(out, 5)
+    _symmetries(out, v)
+    data = _page_data(viewer.write(out))
+    assert data["initial_source"] == viz.default_source(Result.load(out)) == 5
+    assert data["initial_symmetry"] == 1 and data["symmetries"][1]["kind"] == "global"
+    assert [s["rank"] for s in data["symmetries"]] == [1, 2]
+    marks = np.array(data["symmetries"][1]["marks"])
+    assert marks.shape == (viewer.MAX_MARKS, 2) and np.allclose(v[marks[:, 0]] * [-1, 1, 1], v[marks[:, 1]], atol=0.1)
+    run = data["run"]
+    assert list(run) == ["sizes", "seconds", "bp", "parameters", "more"]
+    assert run["sizes"] == {"|Ps|": data["n_source"], "|Pt|": len(v), "edges": run["sizes"]["edges"],
+                            "mesh vertices": len(v)}
+    assert run["bp"] == {"backend": "cpu", "iterations": 1, "converged": True}
+    assert tuple(run["parameters"]) == viewer.MAIN_PARAMETERS and run["parameters"]["n_source"] == 250
+    assert run["seconds"] == {"bp": 0.0, "total": 0.0}
+    more = run["more"]
+    assert more["mode"] == "detect" and "seed" in more and "resolved.scale" in more and "bp.max_change" in more
+    assert not set(more) & set(viewer.MAIN_PARAMETERS) and not any("history" in key for key in more)
+
+
+def _start_page(html: Path, width: int = 900):
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e .[test])")
     if not CHROMIUM.exists() and shutil.which("chromium") is None:
         pytest.skip("chromium is not installed (apt-get install -y chromium; CI installs it in .ci/run)")
@@ -59,7 +121,7 @@ def _start_page(html: Path):
         executable_path=str(CHROMIUM if CHROMIUM.exists() else shutil.which("chromium")),
         args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
     )
-    page = browser.new_page(viewport={"width": 900, "height": 600})
+    page = browser.new_page(viewport={"width": width, "height": 600})
     errors = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
@@ -73,54 +135,77 @@ def _rot(axis, t):
     return np.array([[1, 0, 0], [0, c, -s], [0, s, c]]) if axis == 0 else np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
 
 
+def _red_centre(shot: np.ndarray, left: float, right: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rows and columns of the heat map's red pixels between the fractions ``left`` and
+    ``right`` of the width, above the legend's colour bar."""
+    h, w = shot.shape[:2]
+    red = (shot[..., 0] > 0.6) & (shot[..., 2] < 0.35) & (shot[..., 1] < 0.3)
+    red[int(0.8 * h):] = False
+    red[:, : int(left * w)] = False
+    red[:, int(right * w):] = False
+    return np.nonzero(red)
+
+
 def test_viewer_in_a_headless_browser(tmp_path):
     out, v = sphere_result(tmp_path)
-    record = {"kind": "partial", "score": 0.5, "pairs": [[0, 1]],
-              "source_vertices": np.flatnonzero(v[:, 0] > 0.2).tolist(),
-              "target_vertices": np.flatnonzero(v[:, 0] < -0.2).tolist()}
-    (out / "symmetries.json").write_text(json.dumps([record]))
-    html = viewer.write(out)
-    pw, browser, page, errors = _start_page(html)
+    # The initial rotation is rot_x(0.3) rot_y(0.6) (y up): the sphere point facing the
+    # camera is its third row. The most telling sample is the one on the far side.
+    rotation = _rot(0, 0.3) @ _rot(1, 0.6)
+    sources = v[::16]
+    back = int(np.argmin(np.linalg.norm(sources + rotation[2], axis=1)))
+    _make_telling(out, back)
+    _symmetries(out, v)
+    pw, browser, page, errors = _start_page(viewer.write(out), width=1200)
     try:
+        # On load: the global symmetry (listed second, scored lower) on the left, the marginal
+        # of the most telling sample on the right.
+        assert page.evaluate("window.intrinsym.views") == ["parts", "marginal"]
+        assert page.evaluate("[...window.intrinsym.checked]") == [1]
+        assert page.evaluate("window.intrinsym.source") == back
+        boxes = page.locator("#symmetries input")
+        assert boxes.nth(1).is_checked() and not boxes.nth(0).is_checked()
+        assert "global" in page.locator("#label-parts").inner_text()
+        assert f"source sample {back}" in page.locator("#label-marginal").inner_text()
         canvas = page.locator("canvas")
-        before = tmp_path / "before.png"
-        canvas.screenshot(path=str(before))
-        box = canvas.bounding_box()
-        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-        page.wait_for_function("window.intrinsym.mode === 'marginal'", timeout=10000)
-        after = tmp_path / "after.png"
-        canvas.screenshot(path=str(after))
-        # The centre pixel shows the sphere point facing the camera; the page's initial
-        # rotation is rot_x(0.3) rot_y(0.6) (y up), so that point is R's third row.
-        facing = (_rot(0, 0.3) @ _rot(1, 0.6))[2]
-        sources = v[::16]
-        assert page.evaluate("window.intrinsym.source") == int(np.argmin(np.linalg.norm(sources - facing, axis=1)))
-        a, b = imread(before)[..., :3], imread(after)[..., :3]
-        assert np.abs(a - b).mean() > 0.05  # the grey mesh turned into a heat map
-        heat_blue = (b[..., 2] > 0.5) & (b[..., 0] < 0.3)
-        assert heat_blue.sum() > 0.1 * b.shape[0] * b.shape[1]
-        # A sample on the far side maps to the front: red appears where its image projects
-        # (orthographic, zoom 0.9 of the bounding sphere; see viewer.html).
-        back = int(np.argmin(np.linalg.norm(sources + facing, axis=1)))
-        page.evaluate(f"window.intrinsym.select({back}, -1)")
-        red_shot = tmp_path / "red.png"
-        canvas.screenshot(path=str(red_shot))
-        c = imread(red_shot)[..., :3]
-        h, w = c.shape[:2]
-        red = (c[..., 0] > 0.6) & (c[..., 2] < 0.35)
-        red[int(0.8 * h):] = False  # the colour bar of the legend
-        ys, xs = np.nonzero(red)
+        first = tmp_path / "first.png"
+        canvas.screenshot(path=str(first))
+        a = imread(first)[..., :3]
+        h, w = a.shape[:2]
+        left = a[:, : w // 2]
+        assert ((left[..., 0] > 0.5) & (left[..., 2] < 0.2)).sum() > 1000  # orange source part
+        # The far sample maps to the front: red appears where its image projects in the right
+        # view (orthographic, zoom 0.9 of the bounding sphere; see viewer.html).
+        ys, xs = _red_centre(a, 0.5, 1.0)
         centre = v.mean(axis=0)
-        q = (_rot(0, 0.3) @ _rot(1, 0.6)) @ (-sources[back] - centre)
-        px = 0.9 * min(w, h) / (2 * np.linalg.norm(v - centre, axis=1).max())
-        assert len(ys) > 50
-        assert abs(xs.mean() - (w / 2 + q[0] * px)) < 0.05 * w and abs(ys.mean() - (h / 2 - q[1] * px)) < 0.05 * h
-        # Toggling the symmetry colours its parts.
-        page.locator("#symmetries input").first.check()
-        parts = tmp_path / "parts.png"
-        canvas.screenshot(path=str(parts))
-        p = imread(parts)[..., :3]
-        assert ((p[..., 0] > 0.5) & (p[..., 2] < 0.2)).sum() > 1000  # orange source part
+        q = rotation @ (-sources[back] - centre)
+        px = 0.9 * min(w / 2, h) / (2 * np.linalg.norm(v - centre, axis=1).max())
+        assert len(ys) > 50 and not len(_red_centre(a, 0.0, 0.5)[0])
+        assert abs(xs.mean() - (0.75 * w + q[0] * px)) < 0.05 * w and abs(ys.mean() - (h / 2 - q[1] * px)) < 0.05 * h
+        # A click on either view shows the marginal of the sample under the mouse.
+        facing = int(np.argmin(np.linalg.norm(sources - rotation[2], axis=1)))
+        box = canvas.bounding_box()
+        for x in (0.25, 0.75):
+            page.evaluate("window.intrinsym.select(0, -1)")
+            page.mouse.click(box["x"] + x * box["width"], box["y"] + box["height"] / 2)
+            page.wait_for_function(f"window.intrinsym.source === {facing}", timeout=10000)
+        assert f"source sample {facing}" in page.locator("#label-marginal").inner_text()
+        # Toggling the symmetries recolours the left view.
+        boxes.nth(1).uncheck()
+        assert page.locator("#label-parts").inner_text() == "No symmetry selected"
+        grey = tmp_path / "grey.png"
+        canvas.screenshot(path=str(grey))
+        g = imread(grey)[..., :3][:, : w // 2]
+        assert ((g[..., 0] > 0.5) & (g[..., 2] < 0.2)).sum() < 10
+        boxes.nth(0).check()
+        assert "partial" in page.locator("#label-parts").inner_text()
+        # The run panel: the groups shown, the rest folded.
+        shown = (("sizes", "|Ps|"), ("seconds", "total"), ("bp", "converged"), ("parameters", "trivial_weight"))
+        for group, row in shown:
+            assert row in page.locator(f"#run-{group}").inner_text()
+        assert page.eval_on_selector("#run-more", "e => e.tagName + ' ' + e.open") == "DETAILS false"
+        assert "spin_bins" not in page.locator("#run").inner_text()
+        page.locator("#run-more summary").click()
+        assert "spin_bins" in page.locator("#run").inner_text()
         assert page.locator("#run").inner_text().count("detect") == 1
         assert errors == []
     finally:

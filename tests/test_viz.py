@@ -1,14 +1,15 @@
 """Figures: camera, Eq. 9 interpolation, shading, visibility, and the PNGs themselves."""
 
+import dataclasses
 import json
 import subprocess
 import sys
 
 import numpy as np
 import pytest
-from conftest import sphere_result
 from matplotlib.image import imread
 
+from conftest import sphere_result
 from intrinsym import viz
 from intrinsym.pipeline import Result
 
@@ -78,7 +79,8 @@ def test_marginal_figure_is_red_where_the_marginal_peaks(tmp_path):
     shape = viz.load_shapes(result)[0]
     # Source 0 maps to the antipode of its position; put the camera looking at that point.
     peak = -result.source_points[0]
-    azim = np.degrees(np.arctan2(-peak[0], peak[2]))  # view_rotation(e, a) looks from (-cos e sin a, sin e, cos e cos a)
+    # view_rotation(e, a) looks from (-cos e sin a, sin e, cos e cos a)
+    azim = np.degrees(np.arctan2(-peak[0], peak[2]))
     elev = np.degrees(np.arcsin(np.clip(peak[1], -1, 1)))
     params = viz.FigureParams(views=((elev, azim),), size=3, dpi=80, sigma=0.4)
     img = imread(viz.marginal_figure(shape, result, 0, tmp_path / "m.png", params))
@@ -149,7 +151,7 @@ def test_graph_figure_shows_only_visible_samples(tmp_path):
     back = result.source_points[:, 2] < -0.3
     result.source_points = result.source_points[back]
     result.edges = np.zeros((0, 2), dtype=np.int64)
-    result.info["mode"] = "match"  # no target dots
+    result.info = dataclasses.replace(result.info, mode="match")  # no target dots
     shape = viz.load_shapes(Result.load(out))[0]
     img = imread(viz.graph_figure(shape, result, tmp_path / "g.png", viz.FigureParams(views=((0, 0),), dpi=60)))
     assert _red(img).sum() == 0
@@ -202,14 +204,16 @@ def test_progress_keeps_stage_lines_and_shows_bp_iterations_transiently():
     from rich.console import Console
 
     from intrinsym import cli
+    from intrinsym.progress import BPIteration, StageDone
 
     sink = StringIO()
-    progress = cli._Progress(7, Console(file=sink, force_terminal=True, color_system=None, width=100))
+    progress = cli._Progress(Console(file=sink, force_terminal=True, color_system=None, width=100))
     with progress:
-        progress("load: 0.10 s")
-        progress(f"{cli.BP_LINE} 3: max message change 0.01")
+        progress(StageDone("load", 0.1))
+        progress(BPIteration(3, 0.01, 7))
+        assert "bp iteration 3" in progress.bar.tasks[0].description
         assert "(at most 7)" in progress.bar.tasks[0].description
-        progress("bp: 1.00 s")
+        progress(StageDone("bp", 1.0))
     text = sink.getvalue()
     assert "done load: 0.10 s" in text and "done bp: 1.00 s" in text
 

@@ -13,32 +13,43 @@ sum-product belief propagation with an exact sparse message.
 
 from __future__ import annotations
 
-from importlib import resources
+import importlib.resources
 from pathlib import Path
 
-__version__ = "0.1.0"
+from ._version import __version__
 
 
 def example_path() -> Path:
     """Path of the shipped example mesh (Keenan Crane's spot, public domain)."""
-    return Path(str(resources.files("intrinsym") / "data" / "spot.obj"))
+    return Path(str(importlib.resources.files("intrinsym") / "data" / "spot.obj"))
 
 
+from .errors import InputError, IntrinsymError, ParameterError, ResourceError  # noqa: E402
 from .evaluate import MapScores, MarginalScores, load_symmetry_map, score_map, score_marginals  # noqa: E402
 from .extract import Extraction, ExtractParams, Symmetry  # noqa: E402
-from .mesh import InputError, Shape, load  # noqa: E402
-from .pipeline import Params, ParameterError, Result, detect, make_params, match  # noqa: E402
+from .io import load  # noqa: E402
+from .params import Params, make_params  # noqa: E402
+from .pipeline import detect, match  # noqa: E402
+from .progress import BPIteration, StageDone  # noqa: E402
+from .result import Result  # noqa: E402
+from .runinfo import RunInfo  # noqa: E402
+from .shape import Shape  # noqa: E402
 
 __all__ = [
+    "BPIteration",
     "ExtractParams",
     "Extraction",
     "InputError",
+    "IntrinsymError",
     "MapScores",
     "MarginalScores",
     "ParameterError",
     "Params",
+    "ResourceError",
     "Result",
+    "RunInfo",
     "Shape",
+    "StageDone",
     "Symmetry",
     "__version__",
     "detect",

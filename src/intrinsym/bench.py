@@ -1,25 +1,27 @@
-"""Benchmark: the paper's Table 1 cases at their sizes, seconds per stage and BP figures.
+"""Benchmark: seconds per stage and BP figures of a mesh at given sizes.
 
 Every case runs the whole :func:`intrinsym.pipeline.detect` pipeline in a fresh child
 process (so that its peak memory is its own), then times a few single messages of the
 paper-literal dense form (Eq. 7 with the full |Pt| x |Pt| pairwise table) against ours
-on the same edges and the same inputs, and checks that they agree.
+on the same edges and the same inputs, and checks that they agree. The paper's Table 1
+cases, on stand-in meshes of a data
+folder, are ``benchmarks/table1.py`` of the source tree.
 """
 
 from __future__ import annotations
 
 import multiprocessing
-import os
 import resource
 import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from . import bp, example_path, model, pipeline
+from .params import Params
+from .progress import BPIteration, ProgressEvent
 
 
 @dataclass(frozen=True)
@@ -30,8 +32,7 @@ class Case:
     ----------
     name : str
     mesh : str
-        Mesh path; a relative path is looked up under the shared data folder and falls
-        back to the shipped example mesh when absent.
+        Mesh path.
     n_source, n_target : int
         |Ps| and |Pt|.
     paper_gpu_s, paper_cpu_s : float or None
@@ -46,19 +47,8 @@ class Case:
     paper_cpu_s: float | None = None
 
 
-# Paper Table 1. The paper's own meshes are not available (DESIGN.md, data/README.md):
-# each case runs on a stand-in mesh of the shared data at the paper's |Ps| and |Pt|.
-TABLE1 = (
-    Case("dragon1", "static/stanford-bunny.obj", 115, 6000, 4.10, 2870.30),
-    Case("dragon2", "static/stanford-bunny.obj", 259, 11837, 40.39, 27083.92),
-    Case("cuboctahedron", "kids_sym/0001.isometry.1.off", 126, 10888, 16.83, 1075.45),
-    Case("star", "tosca_sym/victoria0.off", 479, 8000, 73.58, 28004.27),
-    Case("elephant", "tosca_sym/michael1.off", 271, 12722, 55.45, 36920.53),
-    Case("male figure", "tosca_sym/michael1.off", 270, 8000, 14.17, 12894.38),
-    Case("lantern", "tosca_sym/horse0.off", 111, 11434, 12.32, 8604.37),
-)
-
-SMALL = (Case("small", "static/spot.obj", 40, 400),)
+#: One tiny case on the shipped example (a smoke test, seconds).
+SMALL = (Case("small", str(example_path()), 40, 400),)
 
 
 @dataclass
@@ -104,19 +94,7 @@ class CaseResult:
     paper_cpu_s: float | None = None
 
 
-def resolve_mesh(mesh: str, data_dir: Path | None) -> Path:
-    """The mesh file of a case: as given, under ``data_dir``, or the shipped example."""
-    path = Path(mesh)
-    if path.is_absolute() or path.is_file():
-        return path
-    if data_dir is not None and (data_dir / path).is_file():
-        return data_dir / path
-    return example_path()
-
-
-def message_timing(
-    mrf: model.MRF, n_messages: int = 3, block: int = 1024, seed: int = 0
-) -> tuple[float, float, float]:
+def message_timing(mrf: model.MRF, n_messages: int = 3, block: int = 1024, seed: int = 0) -> tuple[float, float, float]:
     """Time messages of the dense paper form and of the sparse kernel from the same inputs.
 
     The inputs are the unary times the first iteration's (uniform) messages. Ours: one
@@ -174,24 +152,29 @@ def _peak_memory_mb() -> float:
     return rss / 2**20 if sys.platform == "darwin" else rss / 2**10
 
 
-def run_case(case: Case, data_dir: Path | None, iterations: int, n_messages: int, log: Callable[[str], None]) -> CaseResult:
+def _describe(event: ProgressEvent) -> str:
+    if isinstance(event, BPIteration):
+        return f"bp iteration {event.iteration}: max message change {event.max_change:.3g}"
+    return f"{event.stage}: {event.seconds:.2f} s"
+
+
+def run_case(case: Case, iterations: int, n_messages: int, log: Callable[[str], None]) -> CaseResult:
     """Run one case in this process: the pipeline, then the message timing."""
-    path = resolve_mesh(case.mesh, data_dir)
-    res = pipeline.detect(path, n_source=case.n_source, n_target=case.n_target, iterations=iterations, log=log)
+    p = Params(n_source=case.n_source, n_target=case.n_target, iterations=iterations)
+    res = pipeline.detect(case.mesh, p, progress=lambda event: log(_describe(event)))
     info = res.info
     log("timing messages, dense paper form against ours")
     dense_s, sparse_s, diff = message_timing(res.mrf(), n_messages)
-    b = info["bp"]
     return CaseResult(
         name=case.name,
-        mesh=str(path),
-        sizes=info["sizes"],
-        stages=info["seconds"],
-        bp_setup=b["setup_seconds"],
-        bp_per_iteration=b["seconds_per_iteration"],
-        bp_total=info["seconds"]["bp"],
-        iterations=b["iterations"],
-        converged=b["converged"],
+        mesh=case.mesh,
+        sizes=asdict(info.sizes),
+        stages=dict(info.seconds),
+        bp_setup=info.bp.setup_seconds,
+        bp_per_iteration=info.bp.seconds_per_iteration,
+        bp_total=info.seconds["bp"],
+        iterations=info.bp.iterations,
+        converged=info.bp.converged,
         peak_memory_mb=_peak_memory_mb(),
         dense_message_s=dense_s,
         sparse_message_s=sparse_s,
@@ -202,9 +185,9 @@ def run_case(case: Case, data_dir: Path | None, iterations: int, n_messages: int
     )
 
 
-def _child(case: Case, data_dir: Path | None, iterations: int, n_messages: int, queue) -> None:
+def _child(case: Case, iterations: int, n_messages: int, queue) -> None:
     try:
-        result = run_case(case, data_dir, iterations, n_messages, lambda line: queue.put(("log", line)))
+        result = run_case(case, iterations, n_messages, lambda line: queue.put(("log", line)))
         queue.put(("done", asdict(result)))
     except Exception as err:  # reported to the parent, which raises it
         queue.put(("error", f"{case.name}: {type(err).__name__}: {err}"))
@@ -212,7 +195,6 @@ def _child(case: Case, data_dir: Path | None, iterations: int, n_messages: int, 
 
 def run(
     cases: Sequence[Case],
-    data_dir: Path | None = None,
     iterations: int = 100,
     n_messages: int = 3,
     log: Callable[[str, str], None] | None = None,
@@ -222,8 +204,6 @@ def run(
     Parameters
     ----------
     cases : sequence of Case
-    data_dir : Path, optional
-        Folder the cases' relative mesh paths are looked up in.
     iterations : int
         Maximum BP iterations (the paper: 100); BP stops earlier when it converges.
     n_messages : int
@@ -239,7 +219,7 @@ def run(
     results = []
     for case in cases:
         queue = ctx.Queue()
-        proc = ctx.Process(target=_child, args=(case, data_dir, iterations, n_messages, queue))
+        proc = ctx.Process(target=_child, args=(case, iterations, n_messages, queue))
         proc.start()
         while True:
             kind, payload = queue.get()
@@ -255,27 +235,45 @@ def run(
     return results
 
 
-def default_data_dir() -> Path | None:
-    """The shared data folder (``$INTRINSYM_DATA`` or ``../shared/data``), if present."""
-    for candidate in (os.environ.get("INTRINSYM_DATA"), Path.cwd().parent / "shared" / "data"):
-        if candidate and Path(candidate).is_dir():
-            return Path(candidate)
-    return None
-
-
 def table(results: Sequence[CaseResult]) -> list[list[str]]:
     """Rows of the printed table, header first."""
-    head = ["case", "|Ps|", "|Pt|", "max|N|", "geodesics", "descriptors", "bp setup", "bp/iter",
-            "bp", "iters", "total", "peak MB", "dense/ours", "paper GPU", "paper CPU"]
+    head = [
+        "case",
+        "|Ps|",
+        "|Pt|",
+        "max|N|",
+        "geodesics",
+        "descriptors",
+        "bp setup",
+        "bp/iter",
+        "bp",
+        "iters",
+        "total",
+        "peak MB",
+        "dense/ours",
+        "paper GPU",
+        "paper CPU",
+    ]
     rows = [head]
     for r in results:
         st = r.stages
-        rows.append([
-            r.name, str(r.sizes["source"]), str(r.sizes["target"]), str(r.sizes["max_degree"]),
-            f"{st.get('geodesics', 0):.2f}", f"{st.get('descriptors', 0):.2f}", f"{r.bp_setup:.2f}",
-            f"{r.bp_per_iteration:.3f}", f"{r.bp_total:.2f}", f"{r.iterations}{'' if r.converged else '+'}",
-            f"{sum(st.values()):.1f}", f"{r.peak_memory_mb:.0f}", f"{r.dense_over_sparse:.0f}x",
-            "-" if r.paper_gpu_s is None else f"{r.paper_gpu_s:.1f}",
-            "-" if r.paper_cpu_s is None else f"{r.paper_cpu_s:.0f}",
-        ])
+        rows.append(
+            [
+                r.name,
+                str(r.sizes["source"]),
+                str(r.sizes["target"]),
+                str(r.sizes["max_degree"]),
+                f"{st.get('geodesics', 0):.2f}",
+                f"{st.get('descriptors', 0):.2f}",
+                f"{r.bp_setup:.2f}",
+                f"{r.bp_per_iteration:.3f}",
+                f"{r.bp_total:.2f}",
+                f"{r.iterations}{'' if r.converged else '+'}",
+                f"{sum(st.values()):.1f}",
+                f"{r.peak_memory_mb:.0f}",
+                f"{r.dense_over_sparse:.0f}x",
+                "-" if r.paper_gpu_s is None else f"{r.paper_gpu_s:.1f}",
+                "-" if r.paper_cpu_s is None else f"{r.paper_cpu_s:.0f}",
+            ]
+        )
     return rows

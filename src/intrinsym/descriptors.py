@@ -4,12 +4,12 @@ This module provides the unary-potential ingredients of the paper (Lasowski et a
 ICCV 2009, Sec. 4): spin images (Johnson & Hebert 1999) of oriented points computed
 against a dense, area-uniform sample of the whole surface, an intensity quantisation
 of those images, and the normalised mutual information between quantised images in
-the corrected form ``NMI' = NMI - 1 = (H1 + H2 - H12) / H12`` in ``[0, 1]`` (see
-DESIGN.md, "Unary").
+the corrected form ``NMI' = NMI - 1 = (H1 + H2 - H12) / H12`` in ``[0, 1]`` (the
+paper's Eq. 2-4 give NMI in [1, 2]; Eq. 5 needs a similarity in [0, 1]).
 
 Beyond the paper, Laplace-Beltrami eigenpairs (robust Laplacian of Sharp & Crane
 2020) give the intrinsic, pose- and reflection-invariant wave- and heat-kernel
-signatures that the informative unaries of issue 3 are built on.
+signatures that the default unary (``wks*spin``) is built on.
 
 All functions take and return plain NumPy arrays; the hot loops are Numba kernels
 parallelised over query points (spin images) or source rows (NMI).
@@ -186,13 +186,10 @@ def spin_images(
     normals = np.ascontiguousarray(normals, dtype=np.float64)
     cloud = np.ascontiguousarray(cloud, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3 or normals.shape != points.shape:
-        raise ValueError(
-            f"points and normals must both be (P, 3); got {points.shape}, {normals.shape}"
-        )
+        raise ValueError(f"points and normals must both be (P, 3); got {points.shape}, {normals.shape}")
     if cloud.ndim != 2 or cloud.shape[1] != 3:
         raise ValueError(f"cloud must be (M, 3); got {cloud.shape}")
-    if not (np.isfinite(points).all() and np.isfinite(normals).all()
-            and np.isfinite(cloud).all()):
+    if not (np.isfinite(points).all() and np.isfinite(normals).all() and np.isfinite(cloud).all()):
         raise ValueError("points, normals and cloud must be finite")
     if not (np.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be a positive finite number; got {radius}")
@@ -208,9 +205,7 @@ def spin_images(
     coords = np.floor((cloud - origin) / cell).astype(np.int64)
     dims = coords.max(axis=0) + 1
     if float(np.prod(dims.astype(np.float64))) >= _MAX_GRID_CELLS:
-        raise ValueError(
-            f"radius {radius} is too small for the cloud's extent: grid of {dims} cells"
-        )
+        raise ValueError(f"radius {radius} is too small for the cloud's extent: grid of {dims} cells")
     keys = (coords[:, 0] * dims[1] + coords[:, 1]) * dims[2] + coords[:, 2]
     cloud_order = np.argsort(keys, kind="stable")
     # Visit the queries in grid order (cells clipped to one layer around the grid).
@@ -345,8 +340,8 @@ def _nmi_kernel(
 def nmi(qa: np.ndarray, qb: np.ndarray, levels: int = 8) -> np.ndarray:
     """Corrected normalised mutual information between all pairs of quantised images.
 
-    ``NMI' = NMI - 1 = (H1 + H2 - H12) / H12`` (paper Eq. 2-4, shifted by -1 as in
-    DESIGN.md), where ``H1``, ``H2`` are the entropies of the level histograms of the
+    ``NMI' = NMI - 1 = (H1 + H2 - H12) / H12`` (paper Eq. 2-4, shifted by -1), where
+    ``H1``, ``H2`` are the entropies of the level histograms of the
     two images over their ``B`` pixels and ``H12`` the entropy of the joint
     (levels x levels) histogram of the ``B`` pixel pairs. ``NMI'`` lies in ``[0, 1]``:
     1 for images that determine each other (identical up to a relabelling of levels),
@@ -424,9 +419,7 @@ def laplace_beltrami(vertices: np.ndarray, faces: np.ndarray | None = None) -> t
     return sp.csr_matrix(stiffness), sp.csr_matrix(mass)
 
 
-def eigenpairs(
-    vertices: np.ndarray, faces: np.ndarray | None, k: int
-) -> tuple[np.ndarray, np.ndarray]:
+def eigenpairs(vertices: np.ndarray, faces: np.ndarray | None, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest Laplace-Beltrami eigenpairs, ``L phi = lambda M phi``.
 
     Solved by shift-invert Lanczos (ARPACK) about a small negative shift, which keeps
@@ -490,9 +483,7 @@ def wks_energies(evals: np.ndarray, n_energies: int = 100, variance: float = 6.0
     return np.linspace(lo + 2 * sigma, hi - 2 * sigma, n_energies), float(sigma)
 
 
-def wave_kernel_signature(
-    evals: np.ndarray, evecs: np.ndarray, energies: np.ndarray, sigma: float
-) -> np.ndarray:
+def wave_kernel_signature(evals: np.ndarray, evecs: np.ndarray, energies: np.ndarray, sigma: float) -> np.ndarray:
     """Logarithm of the wave-kernel signature of points (Aubry, Schlickewei, Cremers 2011).
 
     ``WKS(x, e) = sum_k phi_k(x)^2 f_e(lambda_k)^2 / sum_k f_e(lambda_k)^2`` with

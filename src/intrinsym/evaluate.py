@@ -42,8 +42,10 @@ import trimesh.registration
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from . import geodesics, mesh
+from . import geodesics
+from .errors import InputError
 from .files import atomic_write
+from .shape import Shape, clean, surface_area
 
 
 @dataclass(frozen=True)
@@ -60,7 +62,9 @@ class MarginalScores:
         return asdict(self)
 
 
-def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None, allow_missing: bool = False) -> np.ndarray:
+def load_symmetry_map(
+    path: str | os.PathLike, n_vertices: int | None = None, allow_missing: bool = False
+) -> np.ndarray:
     """Read a symmetry map as a 0-based (N,) int64 array.
 
     Formats: TOSCA ``.sym`` (one 1-based index per line), KIDS ``sym.txt`` (1-based
@@ -70,7 +74,7 @@ def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None, al
 
     Raises
     ------
-    mesh.InputError
+    InputError
         On unreadable files, non-integers or indices out of range.
     """
     p = Path(path)
@@ -81,16 +85,16 @@ def load_symmetry_map(path: str | os.PathLike, n_vertices: int | None = None, al
         else:
             values, base = np.array(p.read_text().split(), dtype=np.float64), 1
     except (OSError, ValueError) as err:
-        raise mesh.InputError(f"{path}: cannot read a symmetry map ({err})") from None
+        raise InputError(f"{path}: cannot read a symmetry map ({err})") from None
     if values.size == 0:
-        raise mesh.InputError(f"{path}: empty symmetry map")
+        raise InputError(f"{path}: empty symmetry map")
     if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
-        raise mesh.InputError(f"{path}: symmetry map holds non-integer entries")
+        raise InputError(f"{path}: symmetry map holds non-integer entries")
     sym = values.astype(np.int64) - base
     if n_vertices is not None and len(sym) != n_vertices:
-        raise mesh.InputError(f"{path}: symmetry map has {len(sym)} entries, the mesh {n_vertices} vertices")
+        raise InputError(f"{path}: symmetry map has {len(sym)} entries, the mesh {n_vertices} vertices")
     if sym.min() < (-1 if allow_missing else 0) or sym.max() >= len(sym):
-        raise mesh.InputError(f"{path}: symmetry map index out of range")
+        raise InputError(f"{path}: symmetry map index out of range")
     return sym
 
 
@@ -119,14 +123,14 @@ def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.nda
     x = np.asarray(vertices, dtype=np.float64)
     x = x - x.mean(axis=0)
     tree = cKDTree(x)
-    best = None
+    best: tuple[np.ndarray, np.ndarray] | None = None
     for normal in np.linalg.svd(x, full_matrices=False)[2]:
         reflected = x - 2.0 * np.outer(x @ normal, normal)
-        _, moved, _ = trimesh.registration.icp(reflected, x, max_iterations=iterations, reflection=False,
-                                               scale=False)
+        _, moved, _ = trimesh.registration.icp(reflected, x, max_iterations=iterations, reflection=False, scale=False)
         residual, sym = tree.query(moved)
         if best is None or np.median(residual) < np.median(best[1]):
             best = (sym.astype(np.int64), residual)
+    assert best is not None
     return best
 
 
@@ -179,8 +183,8 @@ def partial_scores(
     near : float
         Radius of a hit and of a peak, in units of sqrt(area).
     """
-    shape = mesh.Shape(np.asarray(vertices, dtype=np.float64), np.asarray(faces))
-    graph = geodesics.surface_graph(shape.vertices / np.sqrt(mesh.surface_area(shape)), shape.faces)
+    shape = Shape(np.asarray(vertices, dtype=np.float64), np.asarray(faces))
+    graph = geodesics.surface_graph(shape.vertices / np.sqrt(surface_area(shape)), shape.faces)
     labels, sv, tv = np.asarray(labels), np.asarray(source_vertex), np.asarray(target_vertex)
     d_s = geodesics.distances_from(graph, sv)[:, tv]
     d_limb = dijkstra(graph, indices=np.flatnonzero(labels > 0), min_only=True)
@@ -240,7 +244,7 @@ def score_marginals(
     marginals: np.ndarray,
     source_vertex: np.ndarray,
     target_vertex: np.ndarray,
-    shape: mesh.Shape,
+    shape: Shape,
     sym: np.ndarray,
     seed: int = 0,
     near: float = 0.10,
@@ -253,7 +257,7 @@ def score_marginals(
     marginals : (S, T) array
     source_vertex, target_vertex : (S,), (T,) int
         Input-mesh vertex of every source and target sample.
-    shape : mesh.Shape
+    shape : Shape
         The input mesh (as loaded; it is cleaned and normalised to unit area here).
     sym : (N_in,) int
         Ground-truth symmetric image of every input vertex; -1 (a partial symmetry) for
@@ -261,8 +265,8 @@ def score_marginals(
     seed : int
         Seed of the decoy choice.
     """
-    cleaned, vmap = mesh.clean(shape)
-    area = mesh.surface_area(cleaned)
+    cleaned, vmap = clean(shape)
+    area = surface_area(cleaned)
     graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(area), cleaned.faces)
     image = np.asarray(sym)[np.asarray(source_vertex)]
     has = image >= 0
@@ -339,19 +343,22 @@ def load_labels(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
 
     Raises
     ------
-    mesh.InputError
+    InputError
         On unreadable files, non-integers or a wrong length.
     """
     p = Path(path)
     try:
-        values = np.load(p, allow_pickle=False).ravel() if p.suffix.lower() == ".npy" else np.array(
-            p.read_text().split(), dtype=np.float64)
+        values = (
+            np.load(p, allow_pickle=False).ravel()
+            if p.suffix.lower() == ".npy"
+            else np.array(p.read_text().split(), dtype=np.float64)
+        )
     except (OSError, ValueError) as err:
-        raise mesh.InputError(f"{path}: cannot read labels ({err})") from None
+        raise InputError(f"{path}: cannot read labels ({err})") from None
     if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
-        raise mesh.InputError(f"{path}: labels hold non-integer entries")
+        raise InputError(f"{path}: labels hold non-integer entries")
     if len(values) != n_vertices:
-        raise mesh.InputError(f"{path}: {len(values)} labels, the mesh has {n_vertices} vertices")
+        raise InputError(f"{path}: {len(values)} labels, the mesh has {n_vertices} vertices")
     return values.astype(np.int64)
 
 
@@ -421,11 +428,15 @@ def segmentation_scores(predicted: np.ndarray, truth: np.ndarray, labels: np.nda
     return out
 
 
+#: Error thresholds of the correspondence curve, in units of sqrt(area).
+THRESHOLDS = np.linspace(0.0, 0.25, 51)
+
+
 def score_map(
     predicted: np.ndarray,
-    shape: mesh.Shape,
+    shape: Shape,
     sym: np.ndarray,
-    thresholds: np.ndarray = np.linspace(0.0, 0.25, 51),
+    thresholds: np.ndarray = THRESHOLDS,
     labels: np.ndarray | None = None,
 ) -> MapScores:
     """Score a per-vertex symmetry map on the input mesh (normalised to unit area here).
@@ -434,7 +445,7 @@ def score_map(
     ----------
     predicted : (N,) int
         Predicted image of every input vertex, -1 for none.
-    shape : mesh.Shape
+    shape : Shape
         The input mesh as loaded.
     sym : (N,) int
         True image of every input vertex; -1 (a partial symmetry) for none: only the
@@ -444,8 +455,8 @@ def score_map(
     labels : (N,) int, optional
         Part labels for :func:`segmentation_scores`.
     """
-    cleaned, vmap = mesh.clean(shape)
-    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(mesh.surface_area(cleaned)), cleaned.faces)
+    cleaned, vmap = clean(shape)
+    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(surface_area(cleaned)), cleaned.faces)
     truth = np.asarray(sym, dtype=np.int64)
     scored = truth >= 0
     pred = np.asarray(predicted, dtype=np.int64)[scored]

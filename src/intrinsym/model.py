@@ -55,32 +55,6 @@ class MRF:
         return truncation_width(self.lam, self.rho)
 
 
-def nmi_potential(similarity: np.ndarray, gamma: float) -> np.ndarray:
-    """Robust unary of Eq. 5 on the similarity NMI' = NMI - 1 in [0, 1].
-
-    Phi = 1 / (1 + (1 - NMI')^2 / gamma): identical descriptors give 1, unrelated ones
-    ``potential_floor(gamma)`` (about 1/101 for the paper's gamma = 0.01).
-
-    Parameters
-    ----------
-    similarity : (S, T) array, values in [0, 1]
-    gamma : float > 0
-
-    Returns
-    -------
-    (S, T) float64 array
-    """
-    if gamma <= 0:
-        raise ValueError(f"gamma must be positive, got {gamma}")
-    s = np.clip(np.asarray(similarity, dtype=np.float64), 0.0, 1.0)
-    return 1.0 / (1.0 + (1.0 - s) ** 2 / gamma)
-
-
-def potential_floor(gamma: float) -> float:
-    """Smallest value of Eq. 5, reached at NMI' = 0."""
-    return 1.0 / (1.0 + 1.0 / gamma)
-
-
 def truncation_width(lam: float, rho: float) -> float:
     """delta = sqrt(ln(1/rho^2) / lam): psi > rho^2 iff |d(s,q) - d(fs,fq)| < delta."""
     if lam <= 0:
@@ -125,7 +99,7 @@ def suppress_trivial(
     The targets within geodesic ``radius`` of the source sample (the identity's mode)
     are scaled so that their largest value is ``weight`` times the row's largest value
     beyond ``radius`` (never raised, never below ``floor``); ``weight`` 0 puts them at
-    the floor, i.e. removes the identity (DESIGN.md, "Identity").
+    the floor, i.e. removes the identity.
 
     With 0 < ``weight`` < 1 the identity stays in the model as the answer "no symmetric
     partner": a consistent field like any symmetry, which a symmetry's consistent field
@@ -189,93 +163,3 @@ def suppress_peaks(
         row = slice(targets.indptr[peak], targets.indptr[peak + 1])
         out[s, targets.indices[row][targets.dist[row] <= radius]] = floor
     return out
-
-
-def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None = None) -> float:
-    """Typical descriptor distance of a true match at the sampling offset.
-
-    With ``near``, the median of ``distance[s, near[s]]``: the distances from each
-    calibration point to the targets that lie nearest it on the surface, true matches
-    (the identity) displaced by the sampling offset. Without it, the median distance
-    from each source sample to its ``k`` nearest targets in descriptor space, a proxy
-    that shrinks on shapes with many exact symmetries (their images all lie at about
-    zero distance, so the spread of the offset is not measured).
-
-    Parameters
-    ----------
-    distance : (S, T) array
-        Descriptor distances, >= 0.
-    k : int
-        Number of nearest targets per source sample, 1 <= k <= T (without ``near``).
-    near : (S, m) int array, optional
-        Targets nearest each row's point on the surface; -1 entries are ignored.
-
-    Returns
-    -------
-    float, > 0 (a tiny positive number when the descriptor is constant).
-    """
-    d = np.asarray(distance, dtype=np.float64)
-    if near is not None:
-        values = _near_values(d, near).compressed()
-        if values.size == 0:
-            raise ValueError("no calibration pair: every entry of near is -1")
-    else:
-        if not 1 <= k <= d.shape[1]:
-            raise ValueError(f"k must lie in [1, {d.shape[1]}], got {k}")
-        values = np.partition(d, k - 1, axis=1)[:, :k]
-    return max(float(np.median(values)), np.finfo(np.float64).tiny)
-
-
-def row_scales(distance: np.ndarray, near: np.ndarray) -> np.ndarray:
-    """Each row's own spread on true matches: the median of ``distance[s, near[s]]``.
-
-    Parameters
-    ----------
-    distance : (S, T) array
-    near : (S, m) int array
-        Targets nearest each row's point on the surface; -1 entries are ignored.
-
-    Returns
-    -------
-    (S,) float64, 0 for a row without a calibration target.
-    """
-    return np.ma.median(_near_values(distance, near), axis=1).filled(0.0)
-
-
-def _near_values(distance: np.ndarray, near: np.ndarray) -> np.ma.MaskedArray:
-    """(S, m) ``distance[s, near[s]]``, masked where ``near`` is -1."""
-    near = np.asarray(near)
-    d = np.take_along_axis(np.asarray(distance, dtype=np.float64), np.maximum(near, 0), axis=1)
-    return np.ma.masked_array(d, mask=near < 0)
-
-
-def calibrated_potential(distances: list[np.ndarray], scales: list, floor: float = 1e-3) -> np.ndarray:
-    """Unary from descriptor distances, calibrated per descriptor; products combine them.
-
-    ``Phi = max(prod_i exp(-d_i^2 / (2 sigma_i^2)), floor)`` with ``sigma_i`` the
-    measured spread of the i-th descriptor on true matches (:func:`descriptor_scale`).
-    Unlike Eq. 5 with a fixed gamma, a true match at the sampling offset keeps a
-    potential near 1 whatever the descriptor's units; the floor keeps every message
-    bounded below (DESIGN.md, "Division trick").
-
-    Parameters
-    ----------
-    distances : list of (S, T) arrays
-        One descriptor-distance matrix per factor, >= 0.
-    scales : list of float or (S, 1) arrays
-        sigma_i of each factor, > 0, in the units of its distances (per row as a column).
-    floor : float
-        Smallest potential, in (0, 1).
-
-    Returns
-    -------
-    (S, T) float64 array, values in [floor, 1].
-    """
-    if not distances or len(scales) != len(distances):
-        raise ValueError("give one scale per distance matrix, and at least one")
-    if not 0 < floor < 1:
-        raise ValueError(f"floor must lie in (0, 1), got {floor}")
-    exponent = np.zeros(np.shape(distances[0]), dtype=np.float64)
-    for d, sigma in zip(distances, scales):
-        exponent += np.asarray(d, dtype=np.float64) ** 2 / (2.0 * sigma**2)
-    return np.maximum(np.exp(-exponent), floor)

@@ -22,9 +22,7 @@ __all__ = [
 
 
 @nb.njit(cache=True, nogil=True)
-def _fps_kernel(
-    x: np.ndarray, y: np.ndarray, z: np.ndarray, start: int, n_max: int, min_sq: float
-) -> np.ndarray:
+def _fps_kernel(x: np.ndarray, y: np.ndarray, z: np.ndarray, start: int, n_max: int, min_sq: float) -> np.ndarray:
     """Greedy farthest-point selection.
 
     Parameters
@@ -61,7 +59,7 @@ def _fps_kernel(
             dy = y[i] - cy
             dz = z[i] - cz
             best[i] = min(best[i], dx * dx + dy * dy + dz * dz)
-        current = np.argmax(best)
+        current = int(np.argmax(best))
         far_sq = best[current]
         if count == n_max or far_sq < min_sq or far_sq <= 0.0:
             return chosen[:count]
@@ -120,7 +118,7 @@ def farthest_point_sampling(
             raise ValueError(f"cannot select n={n} points from a set of only {n_pts} points")
         n_max, min_sq = int(n), 0.0
     else:
-        if not spacing > 0:
+        if spacing is None or not spacing > 0:
             raise ValueError(f"spacing must be positive, got {spacing}")
         n_max, min_sq = n_pts, float(spacing) ** 2
     start = int(np.random.default_rng(seed).integers(n_pts))
@@ -178,9 +176,7 @@ def area_uniform_points(
     return points, face_index, bary
 
 
-def subdivide_to(
-    vertices: np.ndarray, faces: np.ndarray, min_vertices: int
-) -> tuple[np.ndarray, np.ndarray]:
+def subdivide_to(vertices: np.ndarray, faces: np.ndarray, min_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """Midpoint-subdivide a triangle mesh until it has at least ``min_vertices`` vertices.
 
     Each round splits every triangle into four (``trimesh.remesh.subdivide``); the

@@ -22,9 +22,12 @@ centred at the origin, in arbitrary units (the pipeline normalises the area).
 
 from __future__ import annotations
 
+import functools
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -100,8 +103,13 @@ def cuboctahedron(subdivisions: int = 3) -> GeneratedShape:
     Vertices (+-1, +-1, 0) and permutations; 8 triangles and 6 squares (each square split
     about its centre). ``subdivisions`` 3 gives 1026 vertices, 4 gives 4098.
     """
-    corners = np.array([p for axis in range(3) for p in
-                        np.insert(np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], float), axis, 0.0, axis=1)])
+    corners = np.array(
+        [
+            p
+            for axis in range(3)
+            for p in np.insert(np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], float), axis, 0.0, axis=1)
+        ]
+    )
     quads, tris = [], []
     for axis in range(3):
         for sign in (1.0, -1.0):
@@ -114,7 +122,7 @@ def cuboctahedron(subdivisions: int = 3) -> GeneratedShape:
     for sx in (1, -1):
         for sy in (1, -1):
             for sz in (1, -1):
-                octant = np.flatnonzero((corners @ np.array([sx, sy, sz]) > 1.5))
+                octant = np.flatnonzero(corners @ np.array([sx, sy, sz]) > 1.5)
                 c = corners[octant]
                 normal = np.array([sx, sy, sz], float)
                 if np.dot(np.cross(c[1] - c[0], c[2] - c[0]), normal) < 0:
@@ -133,7 +141,9 @@ def cuboctahedron(subdivisions: int = 3) -> GeneratedShape:
     return GeneratedShape("cuboctahedron", v, f, _vertex_maps(v, group), labels)
 
 
-def _latlon_mesh(ring: np.ndarray, pole: float, north: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _latlon_mesh(
+    ring: np.ndarray, pole: float, north: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Close a latitude-longitude grid of vertices (n_lat, n_lon, 3) into a triangle mesh.
 
     Vertices: the grid (row-major), the poles (0, 0, -pole) and (0, 0, north) (``north``
@@ -151,8 +161,12 @@ def _latlon_mesh(ring: np.ndarray, pole: float, north: float | None = None) -> t
     idx = np.arange(n_lat * n_lon).reshape(n_lat, n_lon)
     nxt = np.roll(idx, -1, axis=1)
     quads = np.stack([idx[:-1], nxt[:-1], nxt[1:], idx[1:]], axis=-1).reshape(-1, 4)
-    caps = np.concatenate([np.column_stack([nxt[0], idx[0], np.full(n_lon, south)]),
-                           np.column_stack([idx[-1], nxt[-1], np.full(n_lon, north)])])
+    caps = np.concatenate(
+        [
+            np.column_stack([nxt[0], idx[0], np.full(n_lon, south)]),
+            np.column_stack([idx[-1], nxt[-1], np.full(n_lon, north)]),
+        ]
+    )
     v, f = _split_quads(v, quads)
     return v, np.vstack([f, caps]), quads
 
@@ -181,8 +195,13 @@ def _lobed(
     r = 1.0 + length * bumps.sum(axis=1)
     grid_lat, grid_lon = np.meshgrid(lat, np.arange(n_lon), indexing="ij")
     rr = r[grid_lon] * np.cos(grid_lat)
-    ring = np.column_stack([rr.ravel() * np.cos(lon[grid_lon.ravel()]), rr.ravel() * np.sin(lon[grid_lon.ravel()]),
-                            thickness * np.sin(grid_lat.ravel())])
+    ring = np.column_stack(
+        [
+            rr.ravel() * np.cos(lon[grid_lon.ravel()]),
+            rr.ravel() * np.sin(lon[grid_lon.ravel()]),
+            thickness * np.sin(grid_lat.ravel()),
+        ]
+    )
     v, f, _ = _latlon_mesh(ring.reshape(len(lat), n_lon, 3), thickness)
     angle = np.arctan2(v[:, 1], v[:, 0])
     gap = np.abs(np.angle(np.exp(1j * (angle[:, None] - lobes[None, :]))))
@@ -216,8 +235,9 @@ def star(arms: int = 5, resolution: int = 12, length: float = 1.2) -> GeneratedS
     lobes = 2 * np.pi * np.arange(arms) / arms
     n_lon = 2 * arms * resolution
     v, f, arm = _lobed(lobes, length, 0.35, n_lon, max(6, resolution), 0.25)
-    planar = [_rotation_z(2 * np.pi * k / arms) for k in range(arms)] + [_reflection(np.pi * k / arms)
-                                                                         for k in range(arms)]
+    planar = [_rotation_z(2 * np.pi * k / arms) for k in range(arms)] + [
+        _reflection(np.pi * k / arms) for k in range(arms)
+    ]
     group = planar[1:] + [lambda x, g=g: g(x) * [1.0, 1.0, -1.0] for g in planar]
     return GeneratedShape(f"star{arms}", v, f, _vertex_maps(v, group), arm)
 
@@ -259,8 +279,14 @@ def bend(vertices: np.ndarray, direction: float, start: float, angle: float, spa
     normal = -np.outer(np.sin(phi), u) + np.outer(np.cos(phi), z)
     height = v @ z
     lateral = v - np.outer(s, u) - np.outer(height, z)
-    moved = (lateral + np.outer(np.minimum(s, start), u) + np.outer(along, u) + np.outer(lift, z)
-             + beyond[:, None] * tangent + height[:, None] * normal)
+    moved = (
+        lateral
+        + np.outer(np.minimum(s, start), u)
+        + np.outer(along, u)
+        + np.outer(lift, z)
+        + beyond[:, None] * tangent
+        + height[:, None] * normal
+    )
     return np.where((s > start)[:, None], moved, v)
 
 
@@ -308,8 +334,14 @@ def _bump(t: np.ndarray) -> np.ndarray:
 #: each plane wave a cos(f d.u + phase) over unit directions d, u (degrees, degrees,
 #: radians^-1, radians, radius units), placed without any symmetry. Their sum bends the
 #: whole body: no patch of it is a piece of a sphere (whose rotations are isometries).
-BODY_WAVES = ((20.0, 50.0, 3.0, 0.4, 0.10), (140.0, -20.0, 4.0, 1.3, 0.08), (250.0, 10.0, 2.5, 2.1, 0.12),
-              (310.0, -60.0, 3.5, 0.7, 0.08), (80.0, 80.0, 5.0, 2.9, 0.06), (200.0, -35.0, 4.5, 1.9, 0.07))
+BODY_WAVES = (
+    (20.0, 50.0, 3.0, 0.4, 0.10),
+    (140.0, -20.0, 4.0, 1.3, 0.08),
+    (250.0, 10.0, 2.5, 2.1, 0.12),
+    (310.0, -60.0, 3.5, 0.7, 0.08),
+    (80.0, 80.0, 5.0, 2.9, 0.06),
+    (200.0, -35.0, 4.5, 1.9, 0.07),
+)
 
 #: Limb collar of :func:`partial`, in units of the limb's elliptical radius: the body
 #: is exactly a unit sphere out to COLLAR[0] (which holds the limb and its thumb) and
@@ -363,7 +395,8 @@ def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> Ge
         offset = 2 * np.pi * ((lon_i - start + n_lon // 2) % n_lon - n_lon // 2) / n_lon
         spread = np.hypot(offset, lat / 1.6) / width
         profile = length * _bump(spread) + 0.6 * length * _bump(
-            np.hypot(offset - 0.5 * width, lat - 0.9 * width) / (0.5 * width))
+            np.hypot(offset - 0.5 * width, lat - 0.9 * width) / (0.5 * width)
+        )
         radius += profile
         body *= 1.0 - _bump(np.maximum(spread - COLLAR[0], 0.0) / (COLLAR[1] - COLLAR[0]))
         limb[profile > 0] = k + 1
@@ -387,18 +420,27 @@ def partial(resolution: int = 16, length: float = 1.2, width: float = 0.4) -> Ge
     for k, image in rolled.items():
         on = np.flatnonzero(limb.ravel() == k)
         sym[grid[on]] = image[on]
-        q = np.flatnonzero(labels[len(grid):] == k)
+        q = np.flatnonzero(labels[len(grid) :] == k)
         sym[len(grid) + q] = len(grid) + quad_of[image[quads[q, 0]]]
     return GeneratedShape("partial", v, f, sym[None, :], labels)
 
 
 def generate(name: str, **options) -> GeneratedShape | tuple[GeneratedShape, GeneratedShape]:
     """The shape ``name`` (one of :data:`NAMES`) with its options."""
-    builders = {"cuboctahedron": cuboctahedron, "star": star, "lantern": lantern, "figure": figure,
-                "partial": partial}
+    builders: dict[str, Callable[..., GeneratedShape | tuple[GeneratedShape, GeneratedShape]]] = {
+        "cuboctahedron": cuboctahedron,
+        "star": star,
+        "lantern": lantern,
+        "figure": figure,
+        "partial": partial,
+    }
     if name not in builders:
         raise ValueError(f"unknown shape {name!r}; expected one of {', '.join(NAMES)}")
     return builders[name](**options)
+
+
+def _save_array(f: IO[bytes], array: np.ndarray) -> None:
+    np.save(f, array)
 
 
 def save(shape: GeneratedShape, path: str | os.PathLike) -> list[Path]:
@@ -423,9 +465,13 @@ def save(shape: GeneratedShape, path: str | os.PathLike) -> list[Path]:
         np.savetxt(f, np.column_stack([np.full(len(shape.faces), 3), shape.faces]), fmt="%d")
 
     stem = mesh_path.with_suffix("")
-    files = {mesh_path: None, Path(f"{stem}.sym.npy"): shape.symmetries[0],
-             Path(f"{stem}.maps.npy"): shape.symmetries, Path(f"{stem}.labels.npy"): shape.labels}
+    files = {
+        mesh_path: None,
+        Path(f"{stem}.sym.npy"): shape.symmetries[0],
+        Path(f"{stem}.maps.npy"): shape.symmetries,
+        Path(f"{stem}.labels.npy"): shape.labels,
+    }
     atomic_write(mesh_path, write_off)
     for file, array in list(files.items())[1:]:
-        atomic_write(file, lambda f, a=array: np.save(f, a), binary=True)
+        atomic_write(file, functools.partial(_save_array, array=array), binary=True)
     return list(files)

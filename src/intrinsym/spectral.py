@@ -1,7 +1,7 @@
 """Spectral baseline: the dominant intrinsic self-symmetry from Laplace-Beltrami eigenfunctions.
 
 Not the paper's method: a comparison for the global map that :mod:`intrinsym.extract`
-reads off the BP marginals (issue 4). Two published steps:
+reads off the BP marginals. Two published steps:
 
 1. Sign search (Ovsjanikov, Sun and Guibas, "Global intrinsic symmetries of shapes",
    SGP 2008). An intrinsic symmetry ``T`` maps every eigenfunction of a non-repeated
@@ -52,8 +52,15 @@ from scipy.spatial.distance import pdist
 
 from . import descriptors, sampling
 
-__all__ = ["distortion", "isolated_eigenvalues", "nearest_images", "seeded_symmetry", "sign_candidates",
-           "spectral_symmetry", "zoomout"]
+__all__ = [
+    "distortion",
+    "isolated_eigenvalues",
+    "nearest_images",
+    "seeded_symmetry",
+    "sign_candidates",
+    "spectral_symmetry",
+    "zoomout",
+]
 
 
 def isolated_eigenvalues(evals: np.ndarray, count: int, min_gap: float = 0.05) -> np.ndarray:
@@ -155,9 +162,7 @@ def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, chunk:
     return images
 
 
-def zoomout(
-    source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int
-) -> tuple[np.ndarray, np.ndarray]:
+def zoomout(source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int) -> tuple[np.ndarray, np.ndarray]:
     """ZoomOut refinement of a point map between two sets of basis rows.
 
     For ``k = k_start, ..., K``: ``C`` (k, k) is the least-squares solution of
@@ -257,7 +262,7 @@ def spectral_symmetry(
         Positions, any length unit.
     faces : (F, 3) int array or None
         Triangles of a connected surface (every vertex in one; see
-        :func:`intrinsym.mesh.clean`); None for a point cloud.
+        :func:`intrinsym.shape.clean`); None for a point cloud.
     n_signs : int
         Eigenfunctions in the sign search (2^n_signs - 1 sign vectors), at most 12.
     n_final : int
@@ -372,8 +377,10 @@ def seeded_symmetry(
     source = np.asarray(source, dtype=np.int64)
     target = np.asarray(target, dtype=np.int64)
     if not 1 <= k_seed <= n_final or len(source) < k_seed or len(source) != len(target):
-        raise ValueError(f"need 1 <= k_seed ({k_seed}) <= n_final ({n_final}) and at least k_seed pairs, "
-                         f"got {len(source)} sources and {len(target)} targets")
+        raise ValueError(
+            f"need 1 <= k_seed ({k_seed}) <= n_final ({n_final}) and at least k_seed pairs, "
+            f"got {len(source)} sources and {len(target)} targets"
+        )
     if (target_vertices is None) != (target_evecs is None):
         raise ValueError("give both target_vertices and target_evecs, or neither")
     if target_evecs is not None:

@@ -9,7 +9,8 @@ Three kinds of figure, each a row of views of the shaded mesh:
   part coloured like the points that map there.
 
 Figures are plain ``matplotlib.figure.Figure`` objects saved through the Agg canvas:
-no pyplot, no display, no global backend switch. Shading is Lambert lighting per face under a light fixed to the camera; faces are
+no pyplot, no display, no global backend switch. Shading is Lambert lighting per face
+under a light fixed to the camera; faces are
 depth-sorted and drawn as one ``PolyCollection`` (painter's algorithm), which keeps a
 100k-face mesh to about a second per view.
 """
@@ -28,9 +29,12 @@ from matplotlib.colors import LinearSegmentedColormap
 from matplotlib.figure import Figure
 from scipy.spatial import cKDTree
 
-from . import mesh
+from .errors import InputError, ParameterError
 from .files import atomic_write
-from .pipeline import ParameterError, Result
+from .io import load
+from .records import part_vertices
+from .result import Result
+from .shape import Shape
 
 HEAT = LinearSegmentedColormap.from_list("heat", ["#2040d0", "#40c0f0", "#f0f0a0", "#f08030", "#d01010"])
 """Blue (0) to red (1), the paper's colouring of a marginal."""
@@ -151,8 +155,9 @@ def visible(points: np.ndarray, vertices: np.ndarray, rotation: np.ndarray, cell
     np.maximum.at(depth, pixel(v[:, :2]), v[:, 2])
     grid = depth.reshape(cells, cells)
     padded = np.pad(grid, 1, constant_values=-np.inf)
-    nearest = np.max([padded[1 + di : 1 + di + cells, 1 + dj : 1 + dj + cells]
-                      for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0).ravel()
+    nearest = np.max(
+        [padded[1 + di : 1 + di + cells, 1 + dj : 1 + dj + cells] for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0
+    ).ravel()
     return p[:, 2] >= nearest[pixel(p[:, :2])] - 2 * cell
 
 
@@ -216,8 +221,8 @@ def default_source(result: Result) -> int:
     """
     m = result.marginals.astype(np.float64)
     m = m / np.maximum(m.max(axis=1, keepdims=True), np.finfo(float).tiny)
-    if result.info.get("mode") == "detect":
-        far = 0.25 * float(result.info["resolved"]["scale"])
+    if result.info.mode == "detect":
+        far = 0.25 * float(result.info.resolved.scale)
         dist = np.linalg.norm(result.source_points[:, None, :] - result.target_points[None, :, :], axis=2)
         m = np.where(dist > far, m, 0.0)
         return int(np.argmax(m.max(axis=1)))
@@ -234,9 +239,11 @@ def _panels(n: int, p: FigureParams) -> tuple[Figure, list[Axes]]:
     return fig, list(axes[0])
 
 
-def _draw_mesh(ax: Axes, vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray, rotation: np.ndarray) -> None:
+def _draw_mesh(ax: Axes, vertices: np.ndarray, faces: np.ndarray | None, rgb: np.ndarray, rotation: np.ndarray) -> None:
+    if faces is None:
+        raise ParameterError("figures need a triangle mesh, not a point cloud")
     polygons, colors = shade_faces(vertices, faces, rgb, rotation)
-    ax.add_collection(PolyCollection(polygons, facecolors=colors, edgecolors="none", antialiased=False))
+    ax.add_collection(PolyCollection(list(polygons), facecolors=colors, edgecolors="none", antialiased=False))
     ax.set_xlim(polygons[..., 0].min(), polygons[..., 0].max())
     ax.set_ylim(polygons[..., 1].min(), polygons[..., 1].max())
 
@@ -251,25 +258,25 @@ def _save(fig: Figure, path: Path) -> Path:
 
 
 def marginal_figure(
-    shape: mesh.Shape,
+    shape: Shape,
     result: Result,
     source: int,
     path: str | Path,
     params: FigureParams = FigureParams(),
-    source_shape: mesh.Shape | None = None,
+    source_shape: Shape | None = None,
 ) -> Path:
     """PNG of the continuous marginal (Eq. 9) of one source sample on the target shape.
 
     Parameters
     ----------
-    shape : mesh.Shape
+    shape : Shape
         The target shape, in the coordinates of ``result.target_points``.
     result : Result
     source : int
         Source sample index.
     path : path of the PNG
     params : FigureParams
-    source_shape : mesh.Shape, optional
+    source_shape : Shape, optional
         Two-shape matching: the source shape, drawn in a first panel with the sample.
     """
     sigma = params.sigma or target_spacing(result.target_points)
@@ -293,14 +300,14 @@ def marginal_figure(
     return _save(fig, Path(path))
 
 
-def graph_figure(shape: mesh.Shape, result: Result, path: str | Path, params: FigureParams = FigureParams()) -> Path:
+def graph_figure(shape: Shape, result: Result, path: str | Path, params: FigureParams = FigureParams()) -> Path:
     """PNG of the source samples (red), their graph and the target samples (blue), paper Fig. 1.
 
     Only points and edges not hidden by the surface are drawn.
     """
     fig, axes = _panels(len(params.views), params)
     rgb = np.broadcast_to(BASE, shape.vertices.shape)
-    targets_on_shape = result.info.get("mode") == "detect"
+    targets_on_shape = result.info.mode == "detect"
     for ax, view in zip(axes, params.views):
         rot = view_rotation(*view, params.up)
         _draw_mesh(ax, shape.vertices, shape.faces, rgb, rot)
@@ -332,16 +339,15 @@ def correspondence_colors(vertices: np.ndarray, record: dict) -> tuple[np.ndarra
     ----------
     vertices : (N, 3) float
     record : dict
-        A ``symmetries.json`` entry: ``source_vertices``, ``target_vertices`` and
+        A ``symmetries.json`` entry: ``source_vertex_index``, ``target_vertex_index`` and
         ``pairs`` ([source vertex, target vertex] per sample pair), input vertex indices.
     """
     lo, span = vertices.min(axis=0), np.ptp(vertices, axis=0)
     position = 0.15 + 0.8 * (vertices - lo) / np.where(span > 0, span, 1.0)
     src, tgt = np.tile(BASE, (len(vertices), 1)), np.tile(BASE, (len(vertices), 1))
-    part = np.asarray(record["source_vertices"], dtype=np.int64)
+    part, image = part_vertices(record)
     src[part] = position[part]
     pairs = np.asarray(record["pairs"], dtype=np.int64).reshape(-1, 2)
-    image = np.asarray(record["target_vertices"], dtype=np.int64)
     if len(pairs) and len(image):
         _, nearest = cKDTree(vertices[pairs[:, 1]]).query(vertices[image])
         tgt[image] = position[pairs[nearest, 0]]
@@ -349,7 +355,7 @@ def correspondence_colors(vertices: np.ndarray, record: dict) -> tuple[np.ndarra
 
 
 def symmetry_figure(
-    shape: mesh.Shape, record: dict, number: int, path: str | Path, params: FigureParams = FigureParams()
+    shape: Shape, record: dict, number: int, path: str | Path, params: FigureParams = FigureParams()
 ) -> Path:
     """PNG of one extracted symmetry (a ``symmetries.json`` entry).
 
@@ -367,8 +373,11 @@ def symmetry_figure(
             ax.set_aspect("equal")
             _draw_mesh(ax, shape.vertices, shape.faces, rgb, view_rotation(*view, params.up))
         axes[row][0].set_title(label, fontsize=9, loc="left")
-    fig.suptitle(f"symmetry {number}: {record.get('kind', '?')}, score {record.get('score', float('nan')):.3f}, "
-                 f"{len(record.get('pairs', []))} sample pairs", fontsize=10)
+    fig.suptitle(
+        f"symmetry {number}: {record.get('kind', '?')}, score {record.get('score', float('nan')):.3f}, "
+        f"{len(record.get('pairs', []))} sample pairs",
+        fontsize=10,
+    )
     return _save(fig, Path(path))
 
 
@@ -380,11 +389,11 @@ def load_symmetries(out_dir: str | Path) -> list[dict]:
     try:
         data = json.loads(path.read_text())
     except (OSError, ValueError) as err:
-        raise mesh.InputError(f"{path}: not a symmetries file ({err})") from None
+        raise InputError(f"{path}: not a symmetries file ({err})") from None
     return data if isinstance(data, list) else data.get("symmetries", [])
 
 
-def load_shapes(result: Result, mesh_path: str | Path | None = None) -> tuple[mesh.Shape, mesh.Shape | None]:
+def load_shapes(result: Result, mesh_path: str | Path | None = None) -> tuple[Shape, Shape | None]:
     """The target shape of a result and, for two-shape matching, its source shape.
 
     Parameters
@@ -394,10 +403,10 @@ def load_shapes(result: Result, mesh_path: str | Path | None = None) -> tuple[me
         Replaces the input named in ``run.json`` (self-matching) or the target input
         (two-shape matching).
     """
-    if result.info.get("mode") == "match":
-        target = mesh.load(mesh_path or result.info["target_input"])
-        return target, mesh.load(result.info["input"])
-    return mesh.load(mesh_path or result.info["input"]), None
+    if result.info.mode == "match":
+        target = load(mesh_path or result.info.target_input or "")
+        return target, load(result.info.input)
+    return load(mesh_path or result.info.input), None
 
 
 def render(
@@ -432,7 +441,7 @@ def render(
     result = Result.load(out_dir)
     target, source_shape = load_shapes(result, mesh_path)
     if target.is_cloud or (source_shape is not None and source_shape.is_cloud):
-        raise mesh.InputError(f"{target.path}: figures need a triangle mesh, not a point cloud")
+        raise InputError(f"{target.path}: figures need a triangle mesh, not a point cloud")
     n_source = len(result.source_points)
     if source is None:
         source = default_source(result)

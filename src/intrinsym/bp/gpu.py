@@ -1,13 +1,13 @@
-"""GPU backend of :mod:`intrinsym.bp` (CuPy): BP with the exact sparse ring message.
+"""The GPU backend (CuPy): loopy BP with the exact sparse ring message.
 
-Imported only when the GPU backend is asked for; CuPy is an optional dependency
-(``pip install intrinsym[gpu]``). It runs the batches of :func:`intrinsym.bp.schedule_steps`
-(the colour classes of the "colour" schedule, all messages at once for "flooding", the
-runs of the paper's "serial" sweeps), so every schedule but "residual" gives the CPU
-backend's messages. Per batch, one kernel launch computes every entry m_{s->q}(fq) of
-the batch's messages, one CUDA thread each, pulling over the ring slice of row fq (rows
-are symmetric; the slices are the ones :func:`intrinsym.bp.ring_bounds` gives the CPU
-kernel).
+CuPy is an optional dependency (``pip install intrinsym[gpu]``), imported only when the
+backend runs, so this module imports without it. It runs the batches of
+:func:`~intrinsym.bp.schedule.schedule_steps` (the colour classes of the "colour"
+schedule, all messages at once for "flooding", the runs of the paper's "serial" sweeps),
+so every schedule but "residual" gives the CPU backend's messages. Per batch, one kernel
+launch computes every entry m_{s->q}(fq) of the batch's messages, one CUDA thread each,
+pulling over the ring slice of row fq (rows are symmetric; the slices are the ones
+:func:`~intrinsym.bp.schedule.ring_bounds` gives).
 """
 
 from __future__ import annotations
@@ -17,9 +17,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .bp import (GPU_SCHEDULES, BPResult, Steps, incoming_edges, initial_messages, iterate, ring_bounds,
-                 schedule_steps, visiting_orders)
-from .model import MRF
+from ..model import MRF
+from .common import BPResult, initial_messages, iterate
+from .schedule import GPU_SCHEDULES, Steps, incoming_edges, ring_bounds, schedule_steps, visiting_orders
 
 _RING_MESSAGE = r"""
 extern "C" __global__ void ring_message(
@@ -56,7 +56,7 @@ def available() -> bool:
 
 def belief_propagation_gpu(
     mrf: MRF,
-    schedule: str = "flooding",
+    schedule: str = "colour",
     iterations: int = 100,
     tol: float = 1e-4,
     damping: float = 0.0,
@@ -68,7 +68,7 @@ def belief_propagation_gpu(
 
     Float32 messages, float64 products over incoming messages. Arguments as in
     :func:`intrinsym.bp.belief_propagation` (validated there); ``schedule`` is one of
-    :data:`GPU_SCHEDULES`.
+    :data:`~intrinsym.bp.schedule.GPU_SCHEDULES`.
 
     Returns
     -------
@@ -92,8 +92,10 @@ def belief_propagation_gpu(
     lo, hi = ring_bounds(mrf.targets.indptr, mrf.targets.dist, mrf.edge_length, mrf.delta)
     kernel = cp.RawKernel(_RING_MESSAGE, "ring_message")
     rings = (
-        cp.asarray(lo, dtype=cp.int32), cp.asarray(hi, dtype=cp.int32),
-        cp.asarray(mrf.targets.indices, dtype=cp.int32), cp.asarray(mrf.targets.dist, dtype=cp.float32),
+        cp.asarray(lo, dtype=cp.int32),
+        cp.asarray(hi, dtype=cp.int32),
+        cp.asarray(mrf.targets.indices, dtype=cp.int32),
+        cp.asarray(mrf.targets.dist, dtype=cp.float32),
         cp.asarray(mrf.edge_length, dtype=cp.float32),
     )
     unary = cp.asarray(mrf.unary, dtype=cp.float64)
@@ -105,7 +107,7 @@ def belief_propagation_gpu(
     def batches(steps: Steps) -> list[tuple]:
         """(sending nodes, owner of every message, directed edges) of every batch."""
         out = []
-        for k0, k1 in zip(steps.batch[:-1], steps.batch[1:]):
+        for k0, k1 in zip(steps.batch[:-1], steps.batch[1:], strict=True):
             e0, e1 = steps.ptr[k0], steps.ptr[k1]
             if e1 > e0:
                 owner = np.repeat(np.arange(k1 - k0), np.diff(steps.ptr[k0 : k1 + 1]))
@@ -118,8 +120,21 @@ def belief_propagation_gpu(
         h = (products[owner] / messages[outs ^ 1]).astype(cp.float32)
         raw = cp.empty_like(h)
         blocks = (h.size + threads - 1) // threads
-        kernel((blocks,), (threads,), (h, h.sum(axis=1), outs, *rings, np.int64(len(outs)), np.int32(n_t),
-                                       np.float32(mrf.lam), np.float32(mrf.rho**2), raw))
+        kernel(
+            (blocks,),
+            (threads,),
+            (
+                h,
+                h.sum(axis=1),
+                outs,
+                *rings,
+                np.int64(len(outs)),
+                np.int32(n_t),
+                np.float32(mrf.lam),
+                np.float32(mrf.rho**2),
+                raw,
+            ),
+        )
         old = messages[outs]
         new = (1.0 - damping) * (raw / raw.max(axis=1, keepdims=True)) + damping * old
         change = float(cp.abs(new - old).max())
@@ -138,5 +153,6 @@ def belief_propagation_gpu(
     history, seconds, converged = iterate(update, iterations, tol, progress)
     b = unary * cp.prod(messages[inc_gpu].astype(cp.float64), axis=1)
     marg = cp.asnumpy((b / b.sum(axis=1, keepdims=True)).astype(cp.float32))
-    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history),
-                    backend="gpu")
+    return BPResult(
+        marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history), backend="gpu"
+    )

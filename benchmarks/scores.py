@@ -1,10 +1,15 @@
 """Score table: the marginal scores of the unary alone and after BP, per configuration.
 
-Regenerates the table of issue 3 on shapes with a ground-truth symmetry map (TOSCA
+Compares unary configurations on shapes with a ground-truth symmetry map (TOSCA
 layout: ``<dir>/<class><pose>.off`` with ``<dir>/<class>.sym``)::
 
-    python -m intrinsym.scores --data ../shared/data/tosca_sym --config paper \\
+    python benchmarks/scores.py --data DIR --config paper \\
         --config wks --config "wks*spin" -o scores.md
+
+The shapes are read from ``DIR/tosca_sym`` when it exists, else from ``DIR`` itself;
+``DIR`` is ``--data`` or ``$INTRINSYM_DATA``. When shapes are asked for (the default
+without ``--mirror``, or ``--shapes``) and there is no such folder, the script says so in
+one line and exits 0.
 
 A configuration is a preset name ("paper", "default") or a unary name (``Params.unary``,
 e.g. "wks*spin", on the default preset). "unary" scores the row-normalised unary,
@@ -22,28 +27,33 @@ import argparse
 import json
 import re
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from . import evaluate, mesh, pipeline
-from .files import atomic_write
+from _data import add_data_argument, data_folder, no_data
+from intrinsym import evaluate, pipeline
+from intrinsym.errors import InputError, ParameterError
+from intrinsym.files import atomic_write
+from intrinsym.io import load
+from intrinsym.params import PRESETS, make_params
+from intrinsym.shape import surface_area
 
-#: The posed TOSCA shapes of issue 3.
+#: The posed TOSCA shapes the unary configurations were compared on.
 SHAPES = ("cat1", "dog1", "horse5", "michael1", "victoria1", "centaur1", "wolf1")
 SCORES = ("mirror_hit", "peak_recall", "decoy_recall", "breadth")
 
 
 def config_params(config: str) -> tuple[str, dict]:
     """(preset, overrides) of a configuration name: a preset, else a unary name."""
-    if config in pipeline.PRESETS:
+    if config in PRESETS:
         return config, {}
     return "default", {"unary": config}
 
 
 def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int = 0,
-                log: Callable[[str], None] | None = None, **params) -> dict:
+                **params) -> dict:
     """Run ``detect`` on one shape and score its unary, its BP marginals and its global map.
 
     ``sym_path`` None: the ground truth is the shape's best reflection
@@ -57,21 +67,22 @@ def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int =
     of sqrt(area)).
     """
     preset, overrides = config_params(config)
-    result = pipeline.detect(mesh_path, preset=preset, log=log, seed=seed, **{**overrides, **params})
-    shape = mesh.load(mesh_path)
+    result = pipeline.detect(mesh_path, make_params(preset, seed=seed, **{**overrides, **params}))
+    shape = load(mesh_path)
     row: dict = {"shape": mesh_path.stem, "config": config}
     if sym_path is None:
         sym, residual = evaluate.extrinsic_mirror(shape.vertices)
-        row["mirror_residual"] = float(np.median(residual) / np.sqrt(mesh.surface_area(shape)))
+        row["mirror_residual"] = float(np.median(residual) / np.sqrt(surface_area(shape)))
     else:
         sym = evaluate.load_symmetry_map(sym_path, len(shape.vertices))
     for column, marginals in (("unary", result.unary), ("bp", result.marginals)):
-        scores = evaluate.score_marginals(marginals, result.source_vertex, result.target_vertex, shape, sym, seed=seed)
+        scores = evaluate.score_marginals(marginals, result.source_point_vertex, result.target_point_vertex, shape,
+                                          sym, seed=seed)
         row[column] = scores.as_dict()
     found = evaluate.score_map(result.symmetry_map(), shape, sym)
     row["map"] = {"within_0.05": found.within(0.05), "within_0.10": found.within(0.10), "mean_error": found.mean_error}
-    row["iterations"] = result.info["bp"]["iterations"]
-    row["seconds"] = {k: round(v, 2) for k, v in result.info["seconds"].items()}
+    row["iterations"] = result.info.bp.iterations
+    row["seconds"] = {k: round(v, 2) for k, v in result.info.seconds.items()}
     return row
 
 
@@ -81,7 +92,9 @@ def markdown(rows: list[dict]) -> str:
             + ["BP iterations", "map within 0.05", "map within 0.10", "map mean error"])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        shape = r["shape"] if "mirror_residual" not in r else f"{r['shape']} (reflection, residual {r['mirror_residual']:.4f})"
+        shape = r["shape"]
+        if "mirror_residual" in r:
+            shape += f" (reflection, residual {r['mirror_residual']:.4f})"
         cells = [shape, f"`{r['config']}`"]
         cells += [f"{r[c][s]:.3f}" for s in SCORES for c in ("unary", "bp")]
         cells.append(str(r["iterations"]))
@@ -95,9 +108,10 @@ def _sym_path(data: Path, shape: str) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m intrinsym.scores``; returns the exit code."""
-    parser = argparse.ArgumentParser(prog="python -m intrinsym.scores", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", default=".", help="folder with <class><pose>.off meshes and <class>.sym maps")
+    """Entry point of ``python benchmarks/scores.py``; returns the exit code."""
+    parser = argparse.ArgumentParser(prog="benchmarks/scores.py", description=__doc__.split("\n\n")[0])
+    add_data_argument(parser, "research data folder (its tosca_sym/) or a folder of <class><pose>.off meshes with "
+                              "<class>.sym maps")
     parser.add_argument("--shapes", help=f"comma-separated shapes (default {','.join(SHAPES)}, none with --mirror)")
     parser.add_argument("--mirror", action="append", default=[],
                         help="a mesh without a symmetry file, scored against its best reflection; repeat")
@@ -110,10 +124,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     params = {k: v for k, v in (("n_source", args.source), ("n_target", args.target),
                                 ("iterations", args.iterations)) if v is not None}
-    data = Path(args.data)
     rows = []
-    shapes = args.shapes if args.shapes is not None else "" if args.mirror else ",".join(SHAPES)
-    cases = [(data / f"{shape}.off", _sym_path(data, shape)) for shape in shapes.split(",") if shape]
+    wanted = args.shapes if args.shapes is not None else "" if args.mirror else ",".join(SHAPES)
+    shapes = [shape for shape in wanted.split(",") if shape]
+    data = data_folder(args.data)
+    if shapes and data is None:
+        print(no_data("scores.py", args.data))
+        return 0
+    if data is not None and (data / "tosca_sym").is_dir():
+        data = data / "tosca_sym"
+    cases = [(data / f"{shape}.off", _sym_path(data, shape)) for shape in shapes]
     cases += [(Path(path), None) for path in args.mirror]
     try:
         for mesh_path, sym_path in cases:
@@ -121,8 +141,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 row = score_shape(mesh_path, sym_path, config, args.seed, **params)
                 print(json.dumps(row), file=sys.stderr)
                 rows.append(row)
-    except (mesh.InputError, pipeline.ParameterError) as err:
-        print(f"intrinsym.scores: error: {err}", file=sys.stderr)
+    except (InputError, ParameterError) as err:
+        print(f"scores.py: error: {err}", file=sys.stderr)
         return 2
     table = markdown(rows)
     print(table, end="")

@@ -1,34 +1,18 @@
-"""Tests of intrinsym.mesh: file formats, input errors, cleaning and basic geometry."""
+"""Tests of intrinsym.io: file formats and the one-line errors for bad files."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
-from intrinsym.mesh import (
-    InputError,
-    Shape,
-    check_memory,
-    clean,
-    from_arrays,
-    load,
-    surface_area,
-    vertex_normals,
-)
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
-
-# A square pyramid: quad base (0, 1, 2, 3) and apex 4.
-PYRAMID_V = np.array(
-    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1.0]], dtype=np.float64
-)
-PYRAMID_F = np.array(  # the quad fan-triangulated from its first corner, then the sides
-    [[0, 3, 2], [0, 2, 1], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]], dtype=np.int64
-)
+import intrinsym
+from conftest import PYRAMID_F, PYRAMID_V, shared, sphere_points
+from intrinsym.errors import InputError
+from intrinsym.io import load
+from intrinsym.shape import clean, surface_area
 
 
 def write(tmp_path: Path, name: str, text: str) -> Path:
@@ -45,19 +29,6 @@ def raises_one_line(path, match: str, **kwargs) -> InputError:
     assert "\n" not in message and "\r" not in message
     assert message.startswith(str(path) + ": ")
     return info.value
-
-
-def sphere_points(n: int, seed: int = 0, radius: float = 1.0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    p = rng.normal(size=(n, 3))
-    return radius * p / np.linalg.norm(p, axis=1, keepdims=True)
-
-
-def shared(relative: str) -> Path:
-    path = DATA / relative
-    if not path.exists():
-        pytest.skip(f"research data not available: {path} (the shared data folder is absent)")
-    return path
 
 
 # ---------------------------------------------------------------------------
@@ -185,15 +156,6 @@ def test_npy_point_cloud(tmp_path, columns):
     shape = load(path)
     assert shape.is_cloud and shape.vertices.dtype == np.float64
     np.testing.assert_array_equal(shape.vertices, data[:, :3].astype(np.float64))
-
-
-def test_shape_arrays_are_read_only():
-    shape = from_arrays(PYRAMID_V, PYRAMID_F)
-    with pytest.raises(ValueError):
-        shape.vertices[0, 0] = 5.0
-    with pytest.raises(ValueError):
-        shape.faces[0, 0] = 1
-    assert isinstance(shape, Shape) and shape.path == ""
 
 
 # ---------------------------------------------------------------------------
@@ -421,192 +383,13 @@ def test_unsupported_or_wrong_content(tmp_path):
     raises_one_line(tmp_path / "junk.stl", "truncated or corrupt binary STL file")
 
 
-@pytest.mark.parametrize(
-    ("vertices", "faces", "match"),
-    [
-        (np.zeros((5, 2)), None, r"vertices must be an \(N, 3\) array"),
-        ([["a", "b", "c"]] * 4, None, "not a numeric array"),
-        (PYRAMID_V * 1j, None, "complex"),
-        (
-            np.vstack([PYRAMID_V, [[np.inf, 0, 0]]]),
-            None,
-            "1 vertices have NaN or infinite coordinates",
-        ),
-        (PYRAMID_V[:3], None, "only 3 points"),
-        (PYRAMID_V, PYRAMID_F + 0.5, "whole numbers"),
-        (PYRAMID_V, PYRAMID_F[:, :2], r"faces must be an \(F, 3\) array"),
-        (PYRAMID_V, np.zeros((0, 3), dtype=int), "no faces"),
-        (PYRAMID_V, PYRAMID_F + 1, "face index 5 out of range"),
-        (PYRAMID_V, PYRAMID_F.astype(str), "must be integers"),
-    ],
-)
-def test_from_arrays_validation(vertices, faces, match):
-    with pytest.raises(InputError, match=match) as info:
-        from_arrays(vertices, faces, path="mem.off")
-    assert str(info.value).startswith("mem.off: ") and "\n" not in str(info.value)
-
-
-def test_from_arrays_accepts_integral_float_faces_and_copies():
-    vertices = PYRAMID_V.copy()
-    shape = from_arrays(vertices, PYRAMID_F.astype(np.float64))
-    assert shape.faces.dtype == np.int64
-    vertices[0, 0] = 7.0
-    assert shape.vertices[0, 0] == 0.0
-
-
-def test_check_memory():
-    check_memory(1, "a tiny buffer", "x.off")
-    with pytest.raises(
-        InputError,
-        match=r"^x\.off: the distance matrix needs 1000000\.0 GB, "
-        r"more than the .* GB of memory available$",
-    ):
-        check_memory(10**15, "the distance matrix", "x.off")
-
-
 # ---------------------------------------------------------------------------
-# clean
+# the shipped example and the shared research data (optional)
 # ---------------------------------------------------------------------------
 
 
-def test_clean_merges_and_drops_by_hand():
-    vertices = np.array(
-        [
-            [0, 0, 0],  # 0
-            [1, 0, 0],  # 1
-            [0, 1, 0],  # 2
-            [0, 0, 1],  # 3
-            [0, 0, 0],  # 4: exact duplicate of 0
-            [0.25, 0, 0],  # 5: only in a zero-area face -> dropped, nearest kept is 0
-            [0, 0, 1.2],  # 6: unreferenced -> dropped, nearest kept is 3
-            [0, 1 + 1e-13, 0],  # 7: near-duplicate of 2
-        ]
-    )
-    faces = np.array(
-        [
-            [0, 1, 2],  # kept
-            [0, 3, 1],  # kept
-            [4, 2, 3],  # kept, becomes (0, 2, 3)
-            [1, 7, 3],  # kept, becomes (1, 2, 3)
-            [0, 0, 1],  # repeated index
-            [0, 5, 1],  # zero area
-            [2, 1, 0],  # duplicate of face 0 (reversed)
-            [4, 1, 7],  # duplicate of face 0 after merging
-        ]
-    )
-    cleaned, vertex_map = clean(from_arrays(vertices, faces, "hand.off"))
-    np.testing.assert_array_equal(cleaned.vertices, vertices[:4])
-    np.testing.assert_array_equal(cleaned.faces, [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 2, 3]])
-    np.testing.assert_array_equal(vertex_map, [0, 1, 2, 3, 0, 0, 3, 2])
-    assert vertex_map.dtype == np.int64
-    assert cleaned.path == "hand.off"
-    again, identity = clean(cleaned)
-    np.testing.assert_array_equal(identity, np.arange(4))
-    np.testing.assert_array_equal(again.faces, cleaned.faces)
-
-
-def test_clean_keeps_components_and_clean_input_unchanged():
-    a = trimesh.creation.icosphere(subdivisions=1)
-    b = a.copy()
-    b.apply_translation([5, 0, 0])
-    both = trimesh.util.concatenate([a, b])
-    cleaned, vertex_map = clean(from_arrays(both.vertices, both.faces))
-    np.testing.assert_array_equal(cleaned.vertices, both.vertices)
-    np.testing.assert_array_equal(cleaned.faces, both.faces)
-    np.testing.assert_array_equal(vertex_map, np.arange(len(both.vertices)))
-
-
-def test_clean_point_cloud_merges_duplicates_only():
-    points = sphere_points(10)
-    cloud = from_arrays(np.vstack([points, points[[2, 7]]]))
-    cleaned, vertex_map = clean(cloud)
-    assert cleaned.is_cloud
-    np.testing.assert_array_equal(cleaned.vertices, points)
-    np.testing.assert_array_equal(vertex_map, list(range(10)) + [2, 7])
-
-
-def test_clean_errors_when_nothing_is_left():
-    collinear = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], dtype=float)
-    with pytest.raises(
-        InputError, match=r"^line\.off: no usable faces: all 2 faces are degenerate"
-    ):
-        clean(from_arrays(collinear, [[0, 1, 2], [1, 2, 3]], "line.off"))
-    with pytest.raises(InputError, match="only 1 distinct points"):
-        clean(from_arrays(np.ones((6, 3))))
-
-
-# ---------------------------------------------------------------------------
-# geometry
-# ---------------------------------------------------------------------------
-
-
-def test_surface_area_of_cube_and_icosphere():
-    box = trimesh.creation.box()
-    assert surface_area(from_arrays(box.vertices, box.faces)) == pytest.approx(6.0, abs=1e-12)
-    sphere = trimesh.creation.icosphere(subdivisions=4, radius=2.0)
-    assert surface_area(from_arrays(sphere.vertices, sphere.faces)) == pytest.approx(
-        16 * np.pi, rel=0.01
-    )
-
-
-def test_surface_area_estimate_of_point_cloud():
-    cloud = from_arrays(sphere_points(20000, seed=3, radius=2.0))
-    assert surface_area(cloud) == pytest.approx(16 * np.pi, rel=0.10)
-
-
-def test_mesh_vertex_normals_point_outward():
-    sphere = trimesh.creation.icosphere(subdivisions=3)
-    normals = vertex_normals(from_arrays(sphere.vertices, sphere.faces))
-    radial = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
-    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
-    assert np.einsum("ij,ij->i", normals, radial).min() > 0.99
-
-
-def test_mesh_vertex_normals_for_unreferenced_vertex():
-    box = trimesh.creation.box()
-    vertices = np.vstack([box.vertices, [[0.6, 0.6, 0.6]]])  # near corner (0.5, 0.5, 0.5)
-    normals = vertex_normals(from_arrays(vertices, box.faces))
-    corner = np.flatnonzero((box.vertices == 0.5).all(axis=1))[0]
-    np.testing.assert_allclose(normals[-1], normals[corner])
-    assert np.all(normals[corner] > 0)
-
-
-def test_point_cloud_normals_point_outward_on_sphere():
-    sphere = trimesh.creation.icosphere(subdivisions=3)
-    radial = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
-    normals = vertex_normals(from_arrays(sphere.vertices))
-    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
-    assert np.einsum("ij,ij->i", normals, radial).min() > 0.99
-
-
-def test_point_cloud_normals_two_components_and_torus():
-    points = sphere_points(1500, seed=5)
-    two = np.vstack([points, 0.5 * points + [10, 0, 0]])
-    normals = vertex_normals(from_arrays(two))
-    radial = np.vstack([points, points])
-    assert np.einsum("ij,ij->i", normals, radial).min() > 0.9
-
-    u, v = np.meshgrid(
-        np.linspace(0, 2 * np.pi, 120, endpoint=False),
-        np.linspace(0, 2 * np.pi, 40, endpoint=False),
-    )
-    u, v = u.ravel(), v.ravel()
-    torus = np.stack(
-        [(1 + 0.3 * np.cos(v)) * np.cos(u), (1 + 0.3 * np.cos(v)) * np.sin(u), 0.3 * np.sin(v)],
-        axis=1,
-    )
-    truth = np.stack([np.cos(v) * np.cos(u), np.cos(v) * np.sin(u), np.sin(v)], axis=1)
-    normals = vertex_normals(from_arrays(torus), k=10)
-    assert np.einsum("ij,ij->i", normals, truth).min() > 0.9
-
-
-# ---------------------------------------------------------------------------
-# shared research data (optional)
-# ---------------------------------------------------------------------------
-
-
-def test_load_spot_obj():
-    shape = load(shared("static/spot.obj"))
+def test_load_shipped_example():
+    shape = load(intrinsym.example_path())
     assert shape.vertices.shape == (2930, 3) and shape.faces.shape == (5856, 3)
     cleaned, vertex_map = clean(shape)
     np.testing.assert_array_equal(vertex_map, np.arange(2930))
@@ -617,20 +400,3 @@ def test_load_wolf_off():
     assert shape.vertices.shape == (4344, 3) and shape.faces.shape == (8684, 3)
     cleaned, _ = clean(shape)
     assert cleaned.faces.shape == (8684, 3)
-
-
-@pytest.mark.slow
-def test_speed_of_normals_and_clean():
-    cloud = from_arrays(sphere_points(50000, seed=9))
-    start = time.perf_counter()
-    vertex_normals(cloud)
-    assert time.perf_counter() - start < 2.0
-    sphere = trimesh.creation.icosphere(subdivisions=6)  # 40962 vertices
-    soup = from_arrays(
-        sphere.vertices[sphere.faces].reshape(-1, 3),
-        np.arange(3 * len(sphere.faces)).reshape(-1, 3),
-    )
-    start = time.perf_counter()
-    cleaned, _ = clean(soup)
-    assert time.perf_counter() - start < 2.0
-    assert len(cleaned.vertices) == len(sphere.vertices)

@@ -1,0 +1,467 @@
+"""Every parameter of the pipeline, each described once.
+
+Each :class:`Params` field carries its help text, paper value and unit in its
+``dataclasses.field`` metadata (:func:`describe` reads them); the command-line options
+(:mod:`intrinsym.cli`) and ``docs/parameters.md`` (:func:`markdown_table`) are generated
+from them. Lengths are in units of sqrt(surface area), so every default is scale-free.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass
+from typing import Any, Literal, get_args, get_origin
+
+from .errors import ParameterError
+from .extract import ExtractParams
+
+Schedule = Literal["colour", "serial", "residual", "flooding"]
+Backend = Literal["auto", "cpu", "gpu"]
+DType = Literal["float32", "float64"]
+Potential = Literal["calibrated", "paper"]
+Calibration = Literal["local", "both", "offset", "descriptor"]
+
+#: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
+UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
+#: Smallest fraction of the global symmetry's sample pairs that the seeded ZoomOut map
+#: must keep (:func:`intrinsym.vertex_maps.agreement`), else the extraction's map stays: a
+#: guard against ZoomOut drifting to another symmetry.
+ZOOMOUT_AGREEMENT = 0.5
+#: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity.
+NO_PARTNER_WEIGHT = 0.7
+#: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
+OFFSET_TARGETS = 3
+#: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
+SPIN_SCALES = (0.5, 1.0, 2.0)
+
+#: Command-line sections, in the order the help lists them.
+GROUPS = ("sampling", "unary", "pairwise", "bp", "trivial match", "extraction", "global map")
+
+
+def _p(
+    default: Any,
+    help: str,
+    group: str,
+    *,
+    paper: str | None = None,
+    unit: str | None = None,
+    flag: str | None = None,
+    off_flag: str | None = None,
+    self_match: bool = False,
+) -> Any:
+    """A :class:`Params` field with its documentation.
+
+    ``flag`` overrides the command-line option (default ``--field-name``); ``off_flag``
+    names a boolean's negative option (default ``--no-...``); ``self_match`` marks a
+    field that only ``detect`` uses.
+    """
+    meta = {
+        "help": help,
+        "group": group,
+        "paper": paper,
+        "unit": unit,
+        "flag": flag,
+        "off_flag": off_flag,
+        "self_match": self_match,
+    }
+    return dataclasses.field(default=default, metadata=meta)
+
+
+AREA = "sqrt(area)"
+
+
+@dataclass(frozen=True)
+class Params:
+    """Every parameter of the pipeline; see ``docs/parameters.md`` for the table.
+
+    Each field's meaning, paper value and unit are in its metadata
+    (:func:`describe`). Values are checked on construction
+    (:class:`~intrinsym.errors.ParameterError`); whether the machine can run them
+    (a GPU for ``backend="gpu"``) is checked when a run starts.
+    """
+
+    n_source: int | None = _p(
+        250,
+        "number of source samples |Ps|; ignored when --source-spacing is set",
+        "sampling",
+        paper="111-479 (Table 1)",
+        flag="--source",
+    )
+    n_target: int | None = _p(
+        4000,
+        "number of target samples |Pt|; ignored when --target-spacing is set",
+        "sampling",
+        paper="6000-12722 (Table 1)",
+        flag="--target",
+    )
+    source_spacing: float | None = _p(None, "Poisson-disc radius of Ps, instead of a count", "sampling", unit=AREA)
+    target_spacing: float | None = _p(None, "Poisson-disc radius of Pt, instead of a count", "sampling", unit=AREA)
+    seed: int = _p(0, "random seed of the sampling and the BP orders", "sampling")
+    spin_bins: int = _p(16, "spin image size in bins per side", "unary", paper="not stated")
+    spin_radius: float = _p(
+        0.25,
+        "spin image support radius; the support must dwarf the offset between a point and its nearest target",
+        "unary",
+        paper="not stated",
+        unit=AREA,
+    )
+    spin_levels: int = _p(8, "intensity levels of the NMI entropies (Eq. 2-4)", "unary")
+    spin_cloud: int = _p(40000, "dense area-uniform surface points the spin images are built from", "unary")
+    gamma: float = _p(0.01, "robustness gamma of the unary (Eq. 5); potential 'paper' only", "unary", paper="0.01")
+    unary: str = _p(
+        "wks*spin",
+        "unary descriptor terms from spin, spin-multi (NMI averaged over 0.5, 1 and 2 "
+        "spin radii), wks, hks, joined by '*' (their potentials multiply)",
+        "unary",
+        paper="spin",
+    )
+    potential: Potential = _p(
+        "calibrated",
+        "similarity-to-potential map: 'paper' is Eq. 5 with gamma on NMI' "
+        "(one spin term only); 'calibrated' is exp(-d^2 / 2 sigma^2) per term, "
+        "sigma measured as --calibration says, floored at --unary-floor",
+        "unary",
+        paper="paper",
+    )
+    eigenpairs: int = _p(100, "Laplace-Beltrami eigenpairs of the WKS / HKS", "unary")
+    energies: int = _p(100, "log-energies of the WKS, diffusion times of the HKS", "unary")
+    calibration: Calibration = _p(
+        "local",
+        "how each calibrated width sigma is measured: 'offset', the median descriptor distance from "
+        "points to the 3 targets nearest them on the surface; 'descriptor', to the --calibration-k "
+        "nearest targets in descriptor space; 'both', the larger; 'local', 'both' raised per source "
+        "sample to its own offset spread (self-matching)",
+        "unary",
+    )
+    calibration_k: int = _p(7, "nearest targets in descriptor space of the 'descriptor' rule", "unary")
+    unary_floor: float = _p(1e-3, "smallest calibrated unary potential, in (0, 1)", "unary")
+    rho: float = _p(0.4, "truncation rho of the pairwise term (Eq. 6)", "pairwise", paper="0.4")
+    tolerance: float = _p(
+        1.5,
+        "half-width delta of the pairwise ring: lambda is chosen so that psi = rho^2 at |d(s,q) - d(fs,fq)| = delta",
+        "pairwise",
+        unit="target spacings",
+    )
+    lam: float | None = _p(
+        None,
+        "raw lambda of Eq. 6, overrides --tolerance (not scale-free)",
+        "pairwise",
+        paper="1e6 (units not stated)",
+        unit="1 / (input length)^2",
+        flag="--lambda",
+    )
+    schedule: Schedule = _p(
+        "colour",
+        "BP message schedule: 'colour', serial sweeps whose independent updates run "
+        "as one batch; 'serial', node by node (the paper's); 'residual', 'colour' in "
+        "which a node sends only while its inputs change; 'flooding', all at once",
+        "bp",
+        paper="serial",
+    )
+    iterations: int = _p(100, "maximum BP iterations T", "bp", paper="100")
+    bp_tol: float = _p(1e-4, "stop BP when the largest change of a max-normalised message is below this", "bp")
+    damping: float = _p(0.0, "message damping, in [0, 1)", "bp")
+    backend: Backend = _p(
+        "auto",
+        "where BP runs: 'auto' is the GPU when CuPy sees a CUDA device, the schedule is "
+        "not 'residual' and dtype is float32, else the CPU",
+        "bp",
+    )
+    dtype: DType = _p("float32", "storage of messages and marginals", "bp")
+    passes: int | None = _p(
+        None,
+        "BP passes; each further pass removes the earlier passes' argmax from the unary "
+        "and finds another mode (default: 1 for detect, 2 for match)",
+        "bp",
+    )
+    pass_radius: float = _p(0.08, "radius about each row's argmax that a further pass removes", "bp", unit=AREA)
+    remove_trivial: bool = _p(
+        True,
+        "weaken the trivial match (targets within --trivial-radius of the source sample) to --trivial-weight",
+        "trivial match",
+        paper="off (identity kept)",
+        off_flag="--keep-trivial",
+        self_match=True,
+    )
+    trivial_radius: float = _p(0.08, "radius of the trivial match", "trivial match", unit=AREA, self_match=True)
+    trivial_weight: float | Literal["auto"] = _p(
+        "auto",
+        "the trivial match's largest unary as a fraction of the row's largest elsewhere, in [0, 1); 0 "
+        "removes it, above 0 it stays as the answer 'no symmetric partner'; 'auto': 0, unless BP's argmax "
+        "keeps fewer than --isometry-threshold of the source edges' lengths, then BP runs again at 0.7",
+        "trivial match",
+        self_match=True,
+    )
+    isometry_threshold: float = _p(
+        0.85,
+        "share of source edges whose length BP's argmax keeps within --d-error or "
+        "one target spacing, below which --trivial-weight auto keeps the identity",
+        "trivial match",
+        self_match=True,
+    )
+    peak_threshold: float = _p(
+        ExtractParams.threshold, "peak threshold t on the max-normalised marginal", "extraction", paper="0.5-0.75"
+    )
+    d_error: float = _p(
+        ExtractParams.d_error, "geodesic error bound of the region growing", "extraction", paper="0.001-0.15", unit=AREA
+    )
+    report_identity: bool = _p(
+        False,
+        "also list the identity symmetries (kind 'identity') in symmetries.json; "
+        "they arise where the trivial match stays in the model",
+        "extraction",
+        self_match=True,
+    )
+    unary_seeds: bool = _p(
+        True, "also grow symmetries from the unary's peaks, not only the marginals'", "extraction", paper="off"
+    )
+    vertex_fit: float = _p(
+        ExtractParams.vertex_fit,
+        "largest relative residual of the local linear fits that "
+        "extend the global map to every input vertex; 0 gives each "
+        "vertex its sample's image",
+        "global map",
+    )
+    zoomout: bool = _p(
+        True,
+        "refine the global symmetry's sample pairs by ZoomOut in the Laplace-Beltrami "
+        "eigenfunctions into the symmetry map (symmetry_map.npy); ignores --vertex-fit",
+        "global map",
+        paper="off",
+        self_match=True,
+    )
+    zoomout_seed: int = _p(
+        16,
+        "eigenfunctions fitted to the global symmetry's pairs (ZoomOut's first level)",
+        "global map",
+        self_match=True,
+    )
+    zoomout_final: int = _p(50, "eigenfunctions of ZoomOut's last level", "global map", self_match=True)
+
+    def __post_init__(self) -> None:
+        for name, value in _choices().items():
+            if getattr(self, name) not in value:
+                raise ParameterError(f"{name} must be one of {value}, got {getattr(self, name)!r}")
+        checks = [
+            (self.n_source is None and self.source_spacing is None, "give n_source or source_spacing"),
+            (self.n_target is None and self.target_spacing is None, "give n_target or target_spacing"),
+            (self.n_source is not None and self.n_source < 2, "n_source must be at least 2"),
+            (self.n_target is not None and self.n_target < 2, "n_target must be at least 2"),
+            (self.spin_bins < 2, "spin_bins must be at least 2"),
+            (self.spin_radius <= 0, "spin_radius must be positive"),
+            (not 2 <= self.spin_levels <= 255, "spin_levels must lie in [2, 255]"),
+            (self.gamma <= 0, "gamma must be positive"),
+            (not 0 < self.rho < 1, "rho must lie in (0, 1)"),
+            (self.tolerance <= 0, "tolerance must be positive"),
+            (self.lam is not None and self.lam <= 0, "lam must be positive"),
+            (self.iterations < 1, "iterations must be at least 1"),
+            (not 0 <= self.damping < 1, "damping must lie in [0, 1)"),
+            (self.trivial_radius < 0, "trivial_radius must be non-negative"),
+            (
+                self.trivial_weight != "auto"
+                and not (isinstance(self.trivial_weight, (int, float)) and 0 <= self.trivial_weight < 1),
+                "trivial_weight must be 'auto' or lie in [0, 1)",
+            ),
+            (not 0 <= self.isometry_threshold <= 1, "isometry_threshold must lie in [0, 1]"),
+            (self.passes is not None and self.passes < 1, "passes must be at least 1"),
+            (self.pass_radius <= 0, "pass_radius must be positive"),
+            (
+                any(t not in UNARY_TERMS for t in self.unary_terms)
+                or len(set(self.unary_terms)) < len(self.unary_terms),
+                f"unary must be distinct terms of {UNARY_TERMS} joined by '*'",
+            ),
+            (
+                self.potential == "paper" and self.unary not in ("spin", "spin-multi"),
+                "potential 'paper' (Eq. 5) applies to a single spin-image term only",
+            ),
+            (self.eigenpairs < 2, "eigenpairs must be at least 2"),
+            (self.energies < 2, "energies must be at least 2"),
+            (self.calibration_k < 1, "calibration_k must be at least 1"),
+            (not 0 < self.unary_floor < 1, "unary_floor must lie in (0, 1)"),
+            (not 1 <= self.zoomout_seed <= self.zoomout_final, "need 1 <= zoomout_seed <= zoomout_final"),
+        ]
+        for bad, message in checks:
+            if bad:
+                raise ParameterError(message)
+        try:
+            self.extraction()
+        except ValueError as err:
+            raise ParameterError(str(err)) from None
+
+    @property
+    def unary_terms(self) -> list[str]:
+        """The descriptor terms of ``unary``."""
+        return self.unary.split("*")
+
+    def extraction(self, no_partner: bool = False) -> ExtractParams:
+        """The symmetry-extraction parameters; ``no_partner``: the trivial match was kept
+        at a weight (:meth:`intrinsym.result.Result.extraction_params` knows whether)."""
+        return ExtractParams(
+            threshold=self.peak_threshold,
+            d_error=self.d_error,
+            unary_seeds=self.unary_seeds,
+            vertex_fit=self.vertex_fit,
+            no_partner=no_partner,
+            keep_identity=self.report_identity,
+        )
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    # The paper's Sec. 5 constants: rho 0.4, gamma 0.01, serial schedule, 100 iterations,
+    # and its model as written, identity included. Its lambda = 1e6 is a raw number in
+    # unstated units; read as a ring half a target spacing wide, it reproduces the
+    # paper's behaviour (BP converging in a handful of iterations, sharpening the unary
+    # rather than smearing it). With remove_trivial=True on top, the identity is removed
+    # outright (no "auto" test).
+    "paper": dict(
+        rho=0.4,
+        gamma=0.01,
+        schedule="serial",
+        iterations=100,
+        remove_trivial=False,
+        tolerance=0.5,
+        unary="spin",
+        potential="paper",
+        unary_seeds=False,
+        vertex_fit=0.0,
+        zoomout=False,
+        passes=1,
+        trivial_weight=0.0,
+    ),
+}
+
+
+def make_params(preset: str = "default", **overrides: Any) -> Params:
+    """Parameters of a named preset ("default" or "paper") with overrides applied."""
+    if preset not in PRESETS:
+        raise ParameterError(f"unknown preset {preset!r}; expected one of {sorted(PRESETS)}")
+    names = {f.name for f in dataclasses.fields(Params)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ParameterError(f"unknown parameter(s): {', '.join(unknown)}")
+    return Params(**{**PRESETS[preset], **overrides})
+
+
+@dataclass(frozen=True)
+class Field:
+    """One parameter as the CLI and the docs show it.
+
+    Attributes
+    ----------
+    name : str
+        The :class:`Params` field.
+    flag, off_flag : str
+        Command-line option; a boolean's negative option (None otherwise).
+    kind : type
+        int, float, str or bool, the value's type on the command line.
+    choices : tuple of str or None
+        The allowed values of an enumeration.
+    words : tuple of str
+        Words a number field also takes (``trivial_weight``'s "auto").
+    optional : bool
+        Whether None is a value (unset).
+    default : object
+    help, group : str
+    paper, unit : str or None
+    self_match : bool
+        Only ``detect`` uses it.
+    """
+
+    name: str
+    flag: str
+    off_flag: str | None
+    kind: type
+    choices: tuple[str, ...] | None
+    words: tuple[str, ...]
+    optional: bool
+    default: Any
+    help: str
+    group: str
+    paper: str | None
+    unit: str | None
+    self_match: bool
+
+
+def _type_parts(hint: Any) -> tuple[list[Any], bool]:
+    """The non-None members of a type hint and whether None is one."""
+    parts = list(get_args(hint)) if get_origin(hint) in (typing.Union, types.UnionType) else [hint]
+    return [a for a in parts if a is not type(None)], type(None) in parts
+
+
+def _choices() -> dict[str, tuple[str, ...]]:
+    """The enumerations of :class:`Params`: field -> allowed values."""
+    hints = typing.get_type_hints(Params)
+    return {name: get_args(hint) for name, hint in hints.items() if get_origin(hint) is Literal}
+
+
+def describe() -> list[Field]:
+    """Every :class:`Params` field with its documentation, in declaration order."""
+    hints = typing.get_type_hints(Params)
+    out = []
+    for f in dataclasses.fields(Params):
+        parts, optional = _type_parts(hints[f.name])
+        literal = tuple(w for a in parts if get_origin(a) is Literal for w in get_args(a))
+        kind = next((a for a in parts if isinstance(a, type)), str)
+        choices = literal if literal and kind is str else None
+        words = literal if literal and kind is not str else ()
+        m = f.metadata
+        flag = m["flag"] or "--" + f.name.replace("_", "-")
+        off = (m["off_flag"] or "--no-" + flag[2:]) if kind is bool else None
+        out.append(
+            Field(
+                f.name,
+                flag,
+                off,
+                kind,
+                choices,
+                words,
+                optional,
+                f.default,
+                m["help"],
+                m["group"],
+                m["paper"],
+                m["unit"],
+                m["self_match"],
+            )
+        )
+    return out
+
+
+def markdown_table() -> str:
+    """``docs/parameters.md``: every parameter with flag, default, paper value and unit."""
+    lines = [
+        "# Parameters",
+        "",
+        "Generated from `intrinsym.params.Params` by `python docs/generate_parameters.py`; do not edit by hand.",
+        "Lengths are in units of sqrt(surface area). The Python name is the `Params` field;",
+        '`intrinsym detect` / `match` take the flag. "detect only" marks the self-matching options.',
+        "",
+    ]
+    for group in GROUPS:
+        lines += [
+            f"## {group.capitalize()}",
+            "",
+            "| field | flag | default | paper | unit | meaning |",
+            "|---|---|---|---|---|---|",
+        ]
+        for f in describe():
+            if f.group != group:
+                continue
+            flag = f"`{f.flag}`" + (f" / `{f.off_flag}`" if f.off_flag else "")
+            values = f.choices or f.words
+            choices = f" {'One of' if f.choices else 'Or'} {', '.join(f'`{c}`' for c in values)}." if values else ""
+            where = " (detect only)" if f.self_match else ""
+            text = f"{f.help}.{choices}{where}".replace("|", "\\|")
+            paper = (f.paper or "").replace("|", "\\|")
+            lines.append(f"| `{f.name}` | {flag} | `{f.default!r}` | {paper} | {f.unit or ''} | {text} |")
+        lines.append("")
+    lines += [
+        "## Presets",
+        "",
+        "`--preset paper` sets: " + ", ".join(f"`{k}={v!r}`" for k, v in PRESETS["paper"].items()) + ".",
+        "",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,211 @@
+"""What a run produced, and its folder: ``result.npz``, ``run.json``,
+``symmetries.json`` and ``symmetry_map.npy`` (``docs/format.md``).
+
+:meth:`Result.save` writes a folder, :meth:`Result.load` reads one, including folders of
+format version 1 (before ``run.json`` had a ``format_version``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar, cast
+
+import numpy as np
+
+from . import model, records
+from .extract import Extraction, ExtractParams, Symmetry
+from .files import atomic_write
+from .params import Params
+from .runinfo import RunInfo
+from .support import Support
+from .vertex_maps import fitted_vertex_map
+
+#: Version-1 name of each renamed ``result.npz`` array.
+V1_ARRAYS = {
+    "source_point_vertex": "source_vertex",
+    "target_point_vertex": "target_vertex",
+    "zoomout_map": "global_map",
+}
+
+
+@dataclass
+class Result:
+    """What a run produced; see :meth:`save` for the file layout.
+
+    Attributes
+    ----------
+    source_points : (S, 3) float64
+        Source samples in the input's coordinates.
+    target_points : (T, 3) float64
+        Target samples in the (target) input's coordinates.
+    source_point_vertex, target_point_vertex : (S,), (T,) int64
+        Nearest input vertex of each sample.
+    edges : (E, 2) int64
+        Source-graph edges (i < j) into the source samples.
+    unary : (S, T) float32
+        Phi of Eq. 5 (after trivial-match removal when enabled).
+    marginals : (S, T) float32
+        Beliefs of Eq. 8, rows summing to 1.
+    params : Params
+    info : RunInfo
+        Sizes, seconds per stage, BP statistics, inputs and versions (``run.json``).
+    support : Support or None
+        Geodesics and Voronoi cells the symmetry extraction needs.
+    extraction : Extraction or None
+        Symmetries (``symmetries.json``) and the global one.
+    zoomout_map : (N_in,) int64 or None
+        The global symmetry refined by ZoomOut, as the image of every input vertex
+        (``Params.zoomout``); None: :meth:`symmetry_map` is the extraction's.
+    pass_marginals : (P - 1, S, T) float32 or None
+        Marginals of the BP passes after the first (``Params.passes``); None for one
+        pass. Their unaries follow from ``unary`` (:attr:`passes`).
+    """
+
+    source_points: np.ndarray
+    target_points: np.ndarray
+    source_point_vertex: np.ndarray
+    target_point_vertex: np.ndarray
+    edges: np.ndarray
+    unary: np.ndarray
+    marginals: np.ndarray
+    params: Params
+    info: RunInfo
+    support: Support | None = None
+    extraction: Extraction | None = None
+    zoomout_map: np.ndarray | None = None
+    pass_marginals: np.ndarray | None = None
+
+    ARRAYS: ClassVar[tuple[str, ...]] = (
+        "source_points",
+        "target_points",
+        "source_point_vertex",
+        "target_point_vertex",
+        "edges",
+        "unary",
+        "marginals",
+    )
+
+    @property
+    def global_symmetry(self) -> Symmetry | None:
+        """The global symmetry (sample pairs), None when there is none or no extraction."""
+        return None if self.extraction is None else self.extraction.global_symmetry
+
+    def extraction_params(self) -> ExtractParams:
+        """The extraction parameters this result was extracted with (``no_partner`` when
+        BP kept the trivial match at a weight)."""
+        return self.params.extraction(no_partner=self.info.no_partner)
+
+    def mrf(self) -> model.MRF:
+        """The MRF of BP's first pass (``unary``, the source graph, the target rings and
+        the resolved lambda); needs ``support``."""
+        if self.support is None:
+            raise ValueError("the result has no support (geodesics) to rebuild its MRF from")
+        return model.MRF(
+            self.unary,
+            self.edges,
+            self.support.edge_length,
+            self.support.targets,
+            self.info.resolved.lambda_normalised,
+            self.params.rho,
+        )
+
+    @property
+    def passes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(marginals, unary) of every BP pass after the first, as the extraction takes
+        them: each pass's unary is the one before it with the argmax of the pass before
+        it removed (:func:`intrinsym.model.suppress_peaks`), as the run made them."""
+        if self.pass_marginals is None or self.support is None:
+            return []
+        floor = self.info.resolved.unary_floor
+        out, unary = [], self.unary
+        for before, marginals in zip([self.marginals, *self.pass_marginals], self.pass_marginals):
+            unary = model.suppress_peaks(unary, before, self.support.targets, self.params.pass_radius, floor)
+            out.append((marginals, unary))
+        return out
+
+    def symmetry_map(self) -> np.ndarray:
+        """(N_in,) int64: the image of every input vertex under the global symmetry
+        (``symmetry_map.npy``), -1 everywhere when there is none.
+
+        The ZoomOut map when the run made one (``zoomout_map``), else the extraction's
+        (:func:`intrinsym.vertex_maps.fitted_vertex_map`). Needs ``support`` and
+        ``extraction``.
+        """
+        if self.support is None or self.extraction is None:
+            raise ValueError("the result has no extraction")
+        sym = self.extraction.global_symmetry
+        if sym is None:
+            return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
+        if self.zoomout_map is not None:
+            return np.asarray(self.zoomout_map, dtype=np.int64)
+        return fitted_vertex_map(
+            sym,
+            self.support,
+            self.edges,
+            self.source_points,
+            self.target_points,
+            self.target_point_vertex,
+            self.extraction.params,
+        )
+
+    def run_json(self) -> dict[str, Any]:
+        """``run.json``'s content: the parameters and :class:`RunInfo`."""
+        return {"params": dataclasses.asdict(self.params), **self.info.to_dict()}
+
+    def save(self, out_dir: str | os.PathLike) -> Path:
+        """Write ``out_dir/result.npz`` and ``out_dir/run.json`` (atomically), and with an
+        extraction ``symmetries.json`` and ``symmetry_map.npy``."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        arrays = {name: getattr(self, name) for name in self.ARRAYS}
+        if self.support is not None:
+            arrays.update(self.support.to_arrays())
+        if self.zoomout_map is not None:
+            arrays["zoomout_map"] = np.asarray(self.zoomout_map, dtype=np.int64)
+        if self.pass_marginals is not None:
+            arrays["pass_marginals"] = np.asarray(self.pass_marginals, dtype=np.float32)
+        run = self.run_json()
+        atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
+        atomic_write(out / "run.json", lambda f: json.dump(run, f, indent=2))
+        if self.support is not None and self.extraction is not None:
+            listed = records.records(
+                self.extraction.symmetries, self.source_point_vertex, self.target_point_vertex, self.support
+            )
+            atomic_write(out / "symmetries.json", lambda f: json.dump(listed, f))
+            vmap = self.symmetry_map()
+            atomic_write(out / "symmetry_map.npy", lambda f: np.save(f, vmap), binary=True)
+        return out
+
+    @classmethod
+    def load(cls, out_dir: str | os.PathLike) -> Result:
+        """Read a result folder written by :meth:`save` (format version 1 or 2). The
+        extraction is not stored; rerun it with :func:`intrinsym.pipeline.extract_result`."""
+        out = Path(out_dir)
+        with np.load(out / "result.npz") as z:
+
+            def get(name: str) -> np.ndarray | None:
+                for key in (name, V1_ARRAYS.get(name)):
+                    if key is not None and key in z.files:
+                        return z[key]
+                return None
+
+            arrays = {name: get(name) for name in cls.ARRAYS}
+            missing = [name for name, value in arrays.items() if value is None]
+            if missing:
+                raise KeyError(f"{out / 'result.npz'} lacks {', '.join(missing)}")
+            support = Support.from_arrays(z) if Support.stored_in(z.files) else None
+            zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
+        run = json.loads((out / "run.json").read_text())
+        params = Params(**run.pop("params"))
+        return cls(
+            **cast(dict[str, Any], arrays),
+            params=params,
+            info=RunInfo.from_dict(run),
+            support=support,
+            zoomout_map=zoomout_map,
+            pass_marginals=pass_marginals,
+        )

@@ -1,0 +1,242 @@
+"""What a run records about itself (``run.json``): sizes, resolved constants, seconds,
+BP statistics, the identity decision, the ZoomOut guard, inputs and versions.
+
+Every record is a frozen dataclass; :meth:`RunInfo.to_dict` / :meth:`RunInfo.from_dict`
+are the JSON form (format :data:`FORMAT_VERSION`; version-1 files, written before the
+field had a version, load too).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import platform
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: Version of the result folder's format (``run.json``'s ``format_version``).
+FORMAT_VERSION = 2
+
+
+@dataclass(frozen=True)
+class Sizes:
+    """Sizes of the model.
+
+    Attributes
+    ----------
+    source, target : int
+        |Ps| and |Pt|.
+    edges, directed_edges : int
+        Source-graph edges, and messages per direction.
+    max_degree : int
+    target_distance_entries : int
+        Stored target-to-target geodesics (the pairwise term's rings).
+    source_working_vertices, target_working_vertices : int
+        Vertices of the working (cleaned, possibly subdivided) shapes.
+    """
+
+    source: int
+    target: int
+    edges: int
+    directed_edges: int
+    max_degree: int
+    target_distance_entries: int
+    source_working_vertices: int
+    target_working_vertices: int
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """Constants the run derived from the parameters, in normalised units (unit sqrt(area)).
+
+    Attributes
+    ----------
+    lambda_normalised, lambda_input_units : float
+        lambda of Eq. 6, normalised and in 1 / (input length)^2.
+    delta : float
+        Half-width of the pairwise ring.
+    target_spacing, target_radius : float
+        Spacing of the targets; radius of the stored target rings.
+    unary_floor : float
+        Smallest unary potential.
+    scale : float
+        Input length per normalised length (sqrt of the input surface area).
+    """
+
+    lambda_normalised: float
+    lambda_input_units: float
+    delta: float
+    target_spacing: float
+    target_radius: float
+    unary_floor: float
+    scale: float
+
+
+@dataclass(frozen=True)
+class PassStats:
+    """Convergence of one BP pass after the first."""
+
+    iterations: int
+    converged: bool
+    max_change: float
+
+
+@dataclass(frozen=True)
+class BPStats:
+    """Belief propagation of the first pass (the marginals), and the further passes.
+
+    Attributes
+    ----------
+    backend : str
+        "cpu" or "gpu".
+    iterations : int
+    converged : bool
+    max_change : float
+        Largest max-normalised message change of the last iteration.
+    history : tuple of float
+        That change per iteration.
+    seconds_per_iteration, setup_seconds : float
+    message_updates : int
+    passes : tuple of PassStats
+    """
+
+    backend: str
+    iterations: int
+    converged: bool
+    max_change: float
+    history: tuple[float, ...]
+    seconds_per_iteration: float
+    setup_seconds: float
+    message_updates: int
+    passes: tuple[PassStats, ...] = ()
+
+
+@dataclass(frozen=True)
+class IdentityDecision:
+    """How the trivial match was treated (self-matching with ``remove_trivial``).
+
+    Attributes
+    ----------
+    weight : float
+        The trivial match's weight BP used (0: removed).
+    isometry : float or None
+        With ``trivial_weight="auto"``: the share of source edges BP's argmax kept.
+    threshold : float or None
+        The threshold it was compared with.
+    removed_iterations : int or None
+        BP iterations of the run with the identity removed, when BP ran again with it kept.
+    """
+
+    weight: float
+    isometry: float | None = None
+    threshold: float | None = None
+    removed_iterations: int | None = None
+
+
+@dataclass(frozen=True)
+class ZoomOutStats:
+    """The seeded ZoomOut refinement of the global symmetry.
+
+    Attributes
+    ----------
+    agreement : float
+        Share of the global symmetry's sample pairs the refined map keeps.
+    used : bool
+        Whether the refined map passed the guard and is the symmetry map.
+    """
+
+    agreement: float
+    used: bool
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """Everything ``run.json`` records besides the parameters.
+
+    Attributes
+    ----------
+    mode : {"detect", "match"}
+    input : str
+        The (source) input's path, or "None".
+    target_input : str or None
+        The target input's path (match).
+    preset : str
+    sizes : Sizes
+    resolved : Resolved
+    seconds : dict of str to float
+        Seconds per stage, in order.
+    bp : BPStats
+    identity : IdentityDecision or None
+    zoomout : ZoomOutStats or None
+    versions : dict of str to str
+    """
+
+    mode: str
+    input: str
+    sizes: Sizes
+    resolved: Resolved
+    seconds: dict[str, float]
+    bp: BPStats
+    preset: str = "default"
+    target_input: str | None = None
+    identity: IdentityDecision | None = None
+    zoomout: ZoomOutStats | None = None
+    versions: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def no_partner(self) -> bool:
+        """Whether BP kept the trivial match at a weight (the answer "no partner")."""
+        return self.identity is not None and self.identity.weight > 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (``run.json`` without ``params``); None entries left out."""
+        out = {"format_version": FORMAT_VERSION, **dataclasses.asdict(self)}
+        out["bp"]["history"] = list(self.bp.history)
+        if out["identity"] is not None:
+            out["identity"] = {k: v for k, v in out["identity"].items() if v is not None}
+        return {k: v for k, v in out.items() if v is not None}
+
+    @classmethod
+    def from_dict(cls, run: dict[str, Any]) -> RunInfo:
+        """Read :meth:`to_dict`'s form, or a version-1 ``run.json`` (no ``format_version``)."""
+        sizes = dict(run["sizes"])
+        if run.get("format_version", 1) < 2:
+            sizes["source_working_vertices"] = sizes.pop("source_vertices")
+            sizes["target_working_vertices"] = sizes.pop("target_vertices")
+        bp = dict(run["bp"])
+        bp["history"] = tuple(bp.get("history", ()))
+        bp["passes"] = tuple(PassStats(**q) for q in bp.get("passes", ()))
+        identity = run.get("identity")
+        zoomout = run.get("zoomout")
+        return cls(
+            mode=run["mode"],
+            input=run["input"],
+            target_input=run.get("target_input"),
+            preset=run.get("preset", "default"),
+            sizes=Sizes(**sizes),
+            resolved=Resolved(**run["resolved"]),
+            seconds=dict(run["seconds"]),
+            bp=BPStats(**bp),
+            identity=IdentityDecision(**identity) if identity else None,
+            zoomout=ZoomOutStats(**zoomout) if zoomout else None,
+            versions=dict(run.get("versions", {})),
+        )
+
+
+def versions() -> dict[str, str]:
+    """Versions of intrinsym, Python and the numerical libraries."""
+    import numba
+    import scipy
+    import trimesh
+
+    from ._version import __version__
+
+    return {
+        "intrinsym": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+        "trimesh": trimesh.__version__,
+    }

@@ -1,0 +1,128 @@
+"""The working surface the stages run on: cleaned, normalised to unit area, sampled.
+
+:func:`prepare` turns any :class:`~intrinsym.shape.Shape` into a :class:`Surface`
+(centred, unit sqrt(area), midpoint-subdivided when too coarse, with its geodesic graph
+and normals); :func:`sample` picks Poisson-disc samples of it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import geodesics, io, sampling
+from .errors import InputError, ParameterError
+from .shape import Shape, clean, from_arrays, surface_area, vertex_normals
+
+#: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, or an object
+#: with ``vertices`` (and ``faces``), such as a trimesh.Trimesh or PointCloud.
+ShapeLike = str | os.PathLike | Shape | tuple | Any
+
+
+@dataclass(frozen=True)
+class Surface:
+    """A cleaned shape, normalised to unit sqrt(area), with what the stages need.
+
+    Attributes
+    ----------
+    shape : Shape
+        Normalised (centred, unit area), cleaned, possibly subdivided working shape.
+    input_vertices : (N_in, 3) float64
+        Vertices of the file as read, for output coordinates.
+    vertex_map : (N_in,) int64
+        Working vertex representing each input vertex.
+    center : (3,) float64
+    scale : float
+        Input length per normalised length (sqrt of the input surface area).
+    graph : scipy.sparse.csr_matrix
+        Geodesic graph of the working shape.
+    normals : (N, 3) float64
+    """
+
+    shape: Shape
+    input_vertices: np.ndarray
+    vertex_map: np.ndarray
+    center: np.ndarray
+    scale: float
+    graph: Any
+    normals: np.ndarray
+
+    def to_input(self, points: np.ndarray) -> np.ndarray:
+        """Normalised coordinates -> the input file's coordinates."""
+        return points * self.scale + self.center
+
+    def nearest_input_vertex(self, points: np.ndarray) -> np.ndarray:
+        """Index of the input vertex nearest each normalised point, (n,) int64."""
+        _, idx = cKDTree(self.input_vertices).query(self.to_input(points))
+        return idx.astype(np.int64)
+
+
+def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
+    """Clean, normalise to unit surface area and (for meshes) subdivide a shape.
+
+    Parameters
+    ----------
+    shape : Shape
+    min_vertices : int
+        Meshes with fewer vertices are midpoint-subdivided until they have this many, so
+        that the dense target sampling has a surface to choose from.
+    """
+    cleaned, vertex_map = clean(shape)
+    area = surface_area(cleaned)
+    if not np.isfinite(area) or area <= 0:
+        raise InputError(f"{shape.path or 'input'}: the surface has zero area")
+    center = cleaned.vertices.mean(axis=0)
+    scale = float(np.sqrt(area))
+    vertices = (cleaned.vertices - center) / scale
+    faces = cleaned.faces
+    if faces is not None and len(vertices) < min_vertices:
+        vertices, faces = sampling.subdivide_to(vertices, faces, min_vertices)
+    work = Shape(vertices, faces, shape.path)
+    return Surface(
+        shape=work,
+        input_vertices=np.asarray(shape.vertices, dtype=np.float64),
+        vertex_map=vertex_map,
+        center=center,
+        scale=scale,
+        graph=geodesics.surface_graph(vertices, faces),
+        normals=vertex_normals(work),
+    )
+
+
+def as_shape(obj: ShapeLike) -> Shape:
+    """Read a :data:`ShapeLike` into a :class:`Shape`."""
+    if isinstance(obj, Shape):
+        return obj
+    if isinstance(obj, (str, os.PathLike)):
+        return io.load(obj)
+    if isinstance(obj, tuple):
+        return from_arrays(*obj)
+    if hasattr(obj, "vertices"):  # a trimesh.Trimesh or PointCloud
+        faces = getattr(obj, "faces", None)
+        return from_arrays(np.asarray(obj.vertices), None if faces is None else np.asarray(faces))
+    raise TypeError(f"cannot read a shape from {type(obj).__name__}")
+
+
+def sample(surface: Surface, n: int | None, spacing: float | None, seed: int) -> np.ndarray:
+    """Poisson-disc sample of working vertices, by count ``n`` or by ``spacing``.
+
+    Returns
+    -------
+    (n,) int64, sorted working-vertex indices.
+    """
+    verts = surface.shape.vertices
+    if spacing is not None:
+        chosen = sampling.farthest_point_sampling(verts, spacing=spacing, seed=seed)
+    elif n is None or n > len(verts):
+        raise ParameterError(
+            f"{surface.shape.path or 'shape'}: asked for {n} samples but the surface has {len(verts)} points"
+        )
+    else:
+        chosen = sampling.farthest_point_sampling(verts, n=n, seed=seed)
+    # Index order, not selection order: near-ties in the farthest-point order flip with
+    # rounding (e.g. after a change of units), the chosen set does not.
+    return np.sort(chosen)

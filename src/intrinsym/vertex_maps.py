@@ -1,0 +1,143 @@
+"""Symmetries extended from the samples to every input vertex.
+
+:func:`vertex_map` gives each input vertex the image of the source sample whose
+geodesic Voronoi cell holds it; :func:`fitted_vertex_map` refines that by local linear
+fits (beyond the paper); :func:`agreement` measures how far any vertex map keeps a
+symmetry's sample pairs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from . import _extract_kernels as kernels
+from .extract import ExtractParams, Symmetry
+from .support import SourceGraph, Support
+
+
+def vertex_map(symmetry: Symmetry, vertex_source: np.ndarray, target_vertex: np.ndarray, n_source: int) -> np.ndarray:
+    """Extend a symmetry to every input vertex.
+
+    Each input vertex takes the image of the source sample whose geodesic Voronoi cell
+    holds it.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    vertex_source : (N,) int64
+        Source sample owning every input vertex (-1 where none).
+    target_vertex : (T,) int64
+        Input vertex (of the target shape) of every target sample.
+    n_source : int
+
+    Returns
+    -------
+    (N,) int64
+        Target input vertex of every input vertex, -1 where the symmetry says nothing.
+    """
+    image = np.append(symmetry.image(n_source), -1)
+    sample = image[np.where(vertex_source >= 0, vertex_source, n_source)]
+    return np.where(sample >= 0, np.asarray(target_vertex)[np.maximum(sample, 0)], -1).astype(np.int64)
+
+
+def agreement(symmetry: Symmetry, vertex_image: np.ndarray, source_vertex: np.ndarray, support: Support) -> float:
+    """How far a vertex map keeps a symmetry's sample pairs.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    vertex_image : (N_a,) int64
+        Target input vertex of every source input vertex (-1 where none).
+    source_vertex : (S,) int64
+        Input vertex of every source sample.
+    support : Support
+
+    Returns
+    -------
+    float
+        Fraction of the pairs s -> t of ``symmetry`` whose source vertex the map sends
+        into the Voronoi cell of a target sample within ``support.targets.radius`` of t
+        (geodesic); 1.0 for an empty symmetry.
+    """
+    if not len(symmetry.source):
+        return 1.0
+    t = support.targets
+    image = np.asarray(vertex_image)[np.asarray(source_vertex)[symmetry.source]]
+    owner = np.where(image >= 0, np.asarray(support.vertex_target)[np.maximum(image, 0)], -1)
+    kept = [
+        b >= 0 and kernels.find(t.indptr, t.indices, t.dist, a, b, t.radius) <= t.radius
+        for a, b in zip(symmetry.target, owner)
+    ]
+    return float(np.mean(kept))
+
+
+def _members(owner: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices grouped by owner: ``order[bounds[i]:bounds[i + 1]]`` are those with
+    ``owner == i`` (entries -1 belong to none)."""
+    order = np.argsort(owner, kind="stable")
+    return order, np.searchsorted(owner[order], np.arange(n + 1))
+
+
+def fitted_vertex_map(
+    symmetry: Symmetry,
+    support: Support,
+    edges: np.ndarray,
+    source_points: np.ndarray,
+    target_points: np.ndarray,
+    target_vertex: np.ndarray,
+    params: ExtractParams = ExtractParams(),
+) -> np.ndarray:
+    """Extend a symmetry to every input vertex through local linear fits (beyond the paper).
+
+    :func:`vertex_map` gives every vertex of a sample's Voronoi cell the sample's image,
+    so parts are resolved only to the sample spacing. Here a mapped sample s with
+    at least two mapped neighbours n fits the linear map L (least squares, minimum norm)
+    with L (p_n - p_s) = q_f(n) - q_f(s); when every neighbour's residual is at most
+    ``params.vertex_fit`` times its edge, each vertex x of the cell goes to the target
+    vertex nearest q_f(s) + L (x - p_s) among those in the cells of the targets within
+    ``support.targets.radius`` of f(s). The other vertices keep :func:`vertex_map`.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    support : Support
+        Needs ``source_mesh_vertices`` and ``target_mesh_vertices``; without them (or with
+        ``params.vertex_fit`` 0) this is :func:`vertex_map`.
+    edges : (E, 2) int64
+    source_points, target_points : (S, 3), (T, 3) float64
+        Sample positions in the frame of the support's vertices.
+    target_vertex : (T,) int64
+    params : ExtractParams
+
+    Returns
+    -------
+    (N_a,) int64
+        Target input vertex of every source input vertex, -1 where the symmetry says
+        nothing.
+    """
+    n_s = len(source_points)
+    out = vertex_map(symmetry, support.vertex_source, target_vertex, n_s)
+    if params.vertex_fit <= 0 or support.source_mesh_vertices is None or support.target_mesh_vertices is None:
+        return out
+    graph = SourceGraph.from_edges(edges, support.edge_length, n_s)
+    image = symmetry.image(n_s)
+    cell_order, cell_bounds = _members(np.asarray(support.vertex_source), n_s)
+    target_order, target_bounds = _members(np.asarray(support.vertex_target), len(target_points))
+    t = support.targets
+    for s in np.flatnonzero(image >= 0):
+        cell = cell_order[cell_bounds[s] : cell_bounds[s + 1]]
+        nbr = graph.neighbour[graph.ptr[s] : graph.ptr[s + 1]]
+        nbr = nbr[image[nbr] >= 0]
+        if len(nbr) < 2 or not len(cell):
+            continue
+        d = source_points[nbr] - source_points[s]
+        e = target_points[image[nbr]] - target_points[image[s]]
+        lin = np.linalg.lstsq(d, e, rcond=None)[0]
+        if np.max(np.linalg.norm(d @ lin - e, axis=1) / np.linalg.norm(d, axis=1)) > params.vertex_fit:
+            continue
+        nearby = t.indices[t.indptr[image[s]] : t.indptr[image[s] + 1]]
+        candidates = np.sort(np.concatenate([target_order[target_bounds[j] : target_bounds[j + 1]] for j in nearby]))
+        y = target_points[image[s]] + (support.source_mesh_vertices[cell] - source_points[s]) @ lin
+        out[cell] = candidates[cKDTree(support.target_mesh_vertices[candidates]).query(y)[1]]
+    return out

@@ -1,0 +1,62 @@
+"""The development benchmark scripts of benchmarks/: their tables and error handling."""
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+import trimesh
+
+from conftest import shared
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import scores  # noqa: E402
+
+
+def test_score_table_markdown():
+    row = {"shape": "cat1", "config": "wks", "iterations": 4,
+           "unary": dict(mirror_hit=0.5, peak_recall=0.25, decoy_recall=0.0, breadth=0.125, n_scored=3),
+           "bp": dict(mirror_hit=1.0, peak_recall=1.0, decoy_recall=0.0, breadth=0.0625, n_scored=3),
+           "map": {"within_0.05": 0.5, "within_0.10": 0.75, "mean_error": 0.03125}}
+    mirrored = dict(row, shape="cow", mirror_residual=0.0001)
+    lines = scores.markdown([row, mirrored]).splitlines()
+    assert lines[0].startswith("| shape | config | unary mirror_hit | bp mirror_hit |")
+    assert lines[0].endswith("| BP iterations | map within 0.05 | map within 0.10 | map mean error |")
+    assert lines[2] == ("| cat1 | `wks` | 0.500 | 1.000 | 0.250 | 1.000 | 0.000 | 0.000 | 0.125 | 0.062 | 4 "
+                        "| 0.500 | 0.750 | 0.031 |")
+    assert lines[3].startswith("| cow (reflection, residual 0.0001) | `wks` |")
+    assert scores.config_params("paper") == ("paper", {})
+    assert scores.config_params("wks*spin") == ("default", {"unary": "wks*spin"})
+
+
+def test_score_table_bad_data_is_one_line_exit_2(tmp_path, capsys):
+    assert scores.main(["--data", str(tmp_path), "--shapes", "cat1", "--config", "wks"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cat1.off" in err[0]
+
+
+@pytest.mark.slow
+def test_wks_spin_scores_on_tosca_wolf(tmp_path):
+    data = shared("tosca_sym/wolf1.off").parent
+    out = tmp_path / "table.md"
+    assert scores.main(["--data", str(data), "--shapes", "wolf1", "--config", "wks*spin", "--source", "100",
+                        "--target", "1000", "--iterations", "5", "-o", str(out)]) == 0
+    row = json.loads(out.with_suffix(".json").read_text())[0]
+    assert row["unary"]["mirror_hit"] >= 0.9 and row["bp"]["mirror_hit"] >= 0.9
+    assert row["bp"]["decoy_recall"] <= 0.05
+    assert row["map"]["within_0.10"] >= 0.9
+
+
+def test_score_table_against_a_reflection(tmp_path):
+    # the generated mirror shape has no symmetry file: its ground truth is its reflection
+    from conftest import mirror_shape
+
+    v, f, _ = mirror_shape()
+    path = tmp_path / "bent.off"
+    trimesh.Trimesh(v, f, process=False).export(path)
+    out = tmp_path / "table.md"
+    assert scores.main(["--mirror", str(path), "--config", "default", "--source", "60", "--target", "600",
+                        "--iterations", "10", "-o", str(out)]) == 0
+    row = json.loads(out.with_suffix(".json").read_text())[0]
+    assert row["shape"] == "bent" and row["mirror_residual"] < 1e-6
+    assert row["bp"]["mirror_hit"] >= 0.9 and row["map"]["within_0.10"] >= 0.9
