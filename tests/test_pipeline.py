@@ -60,6 +60,7 @@ def test_result_contract(spot, spot_result, tmp_path):
         # one shape: its input vertices are stored once, as source_mesh_vertices
         assert sorted(z.files) == sorted(intrinsym.Result.ARRAYS + Support.KEYS
                                          + ("source_mesh_vertices", "zoomout_map"))
+    assert (out / "symmetry_confidence.npy").is_file()
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
     assert json.loads((out / "run.json").read_text())["format_version"] == 2
 
@@ -72,24 +73,27 @@ def test_global_map_is_spots_reflection(spot, spot_result):
     assert scores.within(0.10) >= 0.9 and scores.mean_error < 0.05
 
 
-def test_global_map_by_seeded_zoomout(spot, spot_result, tmp_path):
+def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     r = spot_result
-    assert r.extraction.global_index >= 0 and r.info.zoomout.used
-    assert r.info.zoomout.agreement >= intrinsym.params.ZOOMOUT_AGREEMENT
+    chosen = r.info.global_map
+    assert r.extraction.global_index >= 0 and chosen.source in ("extraction", "zoomout")
+    assert chosen.confidence == max(chosen.masses.values()) and {"extraction", "zoomout"} <= set(chosen.masses)
     assert r.zoomout_map.shape == (len(spot.vertices),) and r.zoomout_map.dtype == np.int64
     assert r.zoomout_map.min() >= 0 and np.mean(r.zoomout_map == np.arange(len(spot.vertices))) < 0.05
-    out = r.save(tmp_path / "zoomout")
+    out = r.save(tmp_path / "chosen")
     assert np.array_equal(np.load(out / "symmetry_map.npy"), r.zoomout_map)
     assert np.array_equal(intrinsym.Result.load(out).zoomout_map, r.zoomout_map)
-    # without it, symmetry_map.npy is the extraction's map of the same symmetry
+    conf = np.load(out / "symmetry_confidence.npy")
+    assert conf.shape == (len(spot.vertices),) and conf.dtype == np.float32 and 0 <= conf.min() <= conf.max() <= 1
+    # the global confidence is the samples' mean confidence
+    per_sample = conf[r.source_point_vertex]
+    assert abs(per_sample.mean() - chosen.confidence) < 0.1
+    # without a chosen map, symmetry_map.npy is the extraction's map of the same symmetry
     plain = dataclasses.replace(r, zoomout_map=None).save(tmp_path / "plain")
     g = r.extraction.symmetries[r.extraction.global_index]
     cells = vertex_maps.vertex_map(g, r.support.vertex_source, r.target_point_vertex, len(r.marginals))
     assert np.array_equal(np.load(plain / "symmetry_map.npy"), cells)
     assert intrinsym.Result.load(plain).zoomout_map is None
-    # the seeded map lands where the extraction's does (within a sample spacing, ~0.16)
-    gap = np.linalg.norm(spot.vertices[r.zoomout_map] - spot.vertices[cells], axis=1) / r.info.resolved.scale
-    assert np.median(gap) < 0.1
 
 
 def test_deterministic_for_a_seed(spot, spot_result):

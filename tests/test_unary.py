@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import evaluate, geodesics, model, shapes
+from intrinsym import evaluate, geodesics, shapes, unary
 from intrinsym.shape import Shape, surface_area
 
 SMALL = dict(n_source=40, n_target=600, spin_cloud=6000, iterations=3)
@@ -71,7 +71,7 @@ def test_calibrated_unaries_peak_at_the_mirror_and_nowhere_else(mirror_results):
 def test_paper_unary_is_eq5_of_spin_nmi(mirror_results):
     _, _, results = mirror_results
     u = results["paper"].unary
-    assert u.min() >= np.float32(model.potential_floor(0.01)) and u.max() <= 1.0
+    assert u.min() >= np.float32(unary.potential_floor(0.01)) and u.max() <= 1.0
     # The identity is kept: every source sample's own target is at (or near) its row maximum.
     assert results["paper"].info.resolved.unary_floor == pytest.approx(1 / 101)
 
@@ -131,8 +131,9 @@ def test_offset_calibration_keeps_every_image_of_a_five_fold_star(mode):
     # sampling offset, and the true images keep their potential.
     star = shapes.star(5)
     shape = Shape(star.vertices, star.faces)
-    run = intrinsym.detect if mode == "detect" else lambda s, **kw: intrinsym.match(s, s, intrinsym.make_params(**kw))
-    kept = {c: _images_kept(run(shape, calibration=c, eigenpairs=30, **dict(SMALL, iterations=1)), star)
+    run = intrinsym.detect if mode == "detect" else lambda s, p: intrinsym.match(s, s, p)
+    sizes = dict(SMALL, iterations=1)
+    kept = {c: _images_kept(run(shape, intrinsym.make_params(calibration=c, eigenpairs=30, **sizes)), star)
             for c in ("both", "descriptor")}
     assert kept["both"] >= 0.6 and kept["descriptor"] <= 0.4, kept
 
