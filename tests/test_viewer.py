@@ -30,8 +30,13 @@ def test_pack_roundtrip_and_row_quantisation():
 
 
 def test_part_masks_mark_source_and_image_bits():
-    masks = viewer.part_masks([{"source_vertex_index": [0, 1], "target_vertex_index": [1, 3]},
-                               {"source_vertices": [0, 1], "target_vertices": [1, 3]}], 5)  # format version 1
+    masks = viewer.part_masks(
+        [
+            {"source_vertex_index": [0, 1], "target_vertex_index": [1, 3]},
+            {"source_vertices": [0, 1], "target_vertices": [1, 3]},
+        ],
+        5,
+    )  # format version 1
     assert masks.tolist() == [[1, 3, 0, 2, 0]] * 2
 
 
@@ -48,6 +53,16 @@ def test_best_symmetry_is_the_global_one_else_the_best_scoring():
     assert len(indices) == viewer.MAX_SYMMETRIES and indices[best] == len(many) - 1 and best == len(indices) - 1
     assert viewer.shown_symmetries(many[:3]) == ([0, 1, 2], 0)
     assert viewer.shown_symmetries([]) == ([], -1)
+
+
+def test_pair_marks_spread_over_the_source_part():
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
+    record = {"pairs": [[0, 3], [1, 2], [2, 1], [3, 0]]}
+    assert viewer.pair_marks(record, vertices, 2) == [[0, 3], [3, 0]]
+    assert viewer.pair_marks(record, vertices, 3) == [[0, 3], [3, 0], [1, 2]]
+    assert viewer.pair_marks(record, vertices) == viewer.pair_marks(record, vertices, 4)
+    assert viewer.pair_marks({"pairs": []}, vertices) == []
+    assert viewer.pair_marks({"pairs": [[1, 1]] * 3}, vertices) == [[1, 1]]
 
 
 def _page_data(html: Path) -> dict:
@@ -84,8 +99,14 @@ def _symmetries(out: Path, v: np.ndarray) -> None:
 
     def record(kind, score, axis):
         part = np.flatnonzero(v[:, axis] > 0.2)
-        return {"kind": kind, "score": score, "pairs": np.column_stack([part, mirror[part]])[::8].tolist(),
-                "source_vertex_index": part.tolist(), "target_vertex_index": np.flatnonzero(v[:, axis] < -0.2).tolist()}
+        return {
+            "kind": kind,
+            "score": score,
+            "pairs": np.column_stack([part, mirror[part]])[::8].tolist(),
+            "source_vertex_index": part.tolist(),
+            "target_vertex_index": np.flatnonzero(v[:, axis] < -0.2).tolist(),
+        }
+
     (out / "symmetries.json").write_text(json.dumps([record("partial", 0.9, 1), record("global", 0.5, 0)]))
 
 
@@ -101,8 +122,12 @@ def test_page_opens_on_the_best_symmetry_and_the_most_telling_sample(tmp_path):
     assert marks.shape == (viewer.MAX_MARKS, 2) and np.allclose(v[marks[:, 0]] * [-1, 1, 1], v[marks[:, 1]], atol=0.1)
     run = data["run"]
     assert list(run) == ["sizes", "seconds", "bp", "parameters", "more"]
-    assert run["sizes"] == {"|Ps|": data["n_source"], "|Pt|": len(v), "edges": run["sizes"]["edges"],
-                            "mesh vertices": len(v)}
+    assert run["sizes"] == {
+        "|Ps|": data["n_source"],
+        "|Pt|": len(v),
+        "edges": run["sizes"]["edges"],
+        "mesh vertices": len(v),
+    }
     assert run["bp"] == {"backend": "cpu", "iterations": 1, "converged": True}
     assert tuple(run["parameters"]) == viewer.MAIN_PARAMETERS and run["parameters"]["n_source"] == 250
     assert run["seconds"] == {"bp": 0.0, "total": 0.0}
@@ -130,56 +155,57 @@ def _start_page(html: Path, width: int = 900):
     return pw, browser, page, errors
 
 
-def _rot(axis, t):
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]]) if axis == 0 else np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
 def _red_centre(shot: np.ndarray, left: float, right: float) -> tuple[np.ndarray, np.ndarray]:
     """Rows and columns of the heat map's red pixels between the fractions ``left`` and
     ``right`` of the width, above the legend's colour bar."""
     h, w = shot.shape[:2]
-    red = (shot[..., 0] > 0.6) & (shot[..., 2] < 0.35) & (shot[..., 1] < 0.3)
-    red[int(0.8 * h):] = False
+    red = (shot[..., 0] > 0.6) & (shot[..., 2] < 0.35)
+    red[int(0.8 * h) :] = False
     red[:, : int(left * w)] = False
-    red[:, int(right * w):] = False
+    red[:, int(right * w) :] = False
     return np.nonzero(red)
 
 
 def test_viewer_in_a_headless_browser(tmp_path):
     out, v = sphere_result(tmp_path)
-    # The initial rotation is rot_x(0.3) rot_y(0.6) (y up): the sphere point facing the
-    # camera is its third row. The most telling sample is the one on the far side.
-    rotation = _rot(0, 0.3) @ _rot(1, 0.6)
     sources = v[::16]
-    back = int(np.argmin(np.linalg.norm(sources + rotation[2], axis=1)))
-    _make_telling(out, back)
+    winner = 1 + int(np.argmin(np.abs(sources[1:, 1])))  # its antipode lies at mid-height
+    _make_telling(out, winner)
     _symmetries(out, v)
-    pw, browser, page, errors = _start_page(viewer.write(out), width=1200)
+    data = _page_data(viewer.write(out))
+    pw, browser, page, errors = _start_page(out / "viewer.html", width=1200)
     try:
         # On load: the global symmetry (listed second, scored lower) on the left, the marginal
-        # of the most telling sample on the right.
+        # of the most telling sample on the right, its top (the antipode) turned to the camera.
         assert page.evaluate("window.intrinsym.views") == ["parts", "marginal"]
         assert page.evaluate("[...window.intrinsym.checked]") == [1]
-        assert page.evaluate("window.intrinsym.source") == back
+        assert page.evaluate("window.intrinsym.source") == winner
         boxes = page.locator("#symmetries input")
         assert boxes.nth(1).is_checked() and not boxes.nth(0).is_checked()
         assert "global" in page.locator("#label-parts").inner_text()
-        assert f"source sample {back}" in page.locator("#label-marginal").inner_text()
+        assert f"source sample {winner}" in page.locator("#label-marginal").inner_text()
+        rotation = np.array(page.evaluate("window.intrinsym.rotation()")).reshape(3, 3)
+        centre = v.mean(axis=0)
+        q = rotation @ (-sources[winner] - centre)
+        assert abs(q[0]) < 0.05 and abs(q[1]) < 0.05 and q[2] > 0.95
+        # The discs of the first marked pair: one colour, around both ends of the pair.
+        colors = np.array(page.evaluate("Array.from(window.intrinsym.colors.parts)")).reshape(-1, 3)
+        marked = np.flatnonzero(np.abs(colors - [0.85, 0.1, 0.1]).max(axis=1) < 1e-6)
+        ends = v[data["symmetries"][1]["marks"][0]]
+        near = np.linalg.norm(v[marked, None] - ends[None], axis=2)
+        assert (near.min(axis=0) < 1e-9).all() and (near.min(axis=1) < 0.1).all()
         canvas = page.locator("canvas")
         first = tmp_path / "first.png"
         canvas.screenshot(path=str(first))
         a = imread(first)[..., :3]
         h, w = a.shape[:2]
         left = a[:, : w // 2]
-        assert ((left[..., 0] > 0.5) & (left[..., 2] < 0.2)).sum() > 1000  # orange source part
-        # The far sample maps to the front: red appears where its image projects in the right
-        # view (orthographic, zoom 0.9 of the bounding sphere; see viewer.html).
+        assert (np.abs(left[..., 0] - left[..., 2]) > 0.15).sum() > 0.2 * left[..., 0].size  # the parts, not grey
+        # Red appears where the antipode projects in the right view (orthographic, zoom 0.9 of the
+        # bounding sphere; see viewer.html).
         ys, xs = _red_centre(a, 0.5, 1.0)
-        centre = v.mean(axis=0)
-        q = rotation @ (-sources[back] - centre)
         px = 0.9 * min(w / 2, h) / (2 * np.linalg.norm(v - centre, axis=1).max())
-        assert len(ys) > 50 and not len(_red_centre(a, 0.0, 0.5)[0])
+        assert len(ys) > 50
         assert abs(xs.mean() - (0.75 * w + q[0] * px)) < 0.05 * w and abs(ys.mean() - (h / 2 - q[1] * px)) < 0.05 * h
         # A click on either view shows the marginal of the sample under the mouse.
         facing = int(np.argmin(np.linalg.norm(sources - rotation[2], axis=1)))
@@ -195,12 +221,12 @@ def test_viewer_in_a_headless_browser(tmp_path):
         grey = tmp_path / "grey.png"
         canvas.screenshot(path=str(grey))
         g = imread(grey)[..., :3][:, : w // 2]
-        assert ((g[..., 0] > 0.5) & (g[..., 2] < 0.2)).sum() < 10
+        assert (np.abs(g[..., 0] - g[..., 2]) > 0.15).sum() < 10
         boxes.nth(0).check()
         assert "partial" in page.locator("#label-parts").inner_text()
         # The run panel: the groups shown, the rest folded.
-        shown = (("sizes", "|Ps|"), ("seconds", "total"), ("bp", "converged"), ("parameters", "trivial_weight"))
-        for group, row in shown:
+        rows = {"sizes": "|Ps|", "seconds": "total", "bp": "converged", "parameters": "trivial_weight"}
+        for group, row in rows.items():
             assert row in page.locator(f"#run-{group}").inner_text()
         assert page.eval_on_selector("#run-more", "e => e.tagName + ' ' + e.open") == "DETAILS false"
         assert "spin_bins" not in page.locator("#run").inner_text()

@@ -5,9 +5,12 @@ hand-written WebGL2 viewer) gets the mesh, the marginals, the per-vertex weights
 Eq. 9, the symmetries and the run's parameters and scores inlined as zlib-compressed
 base64 arrays, which the browser inflates with its built-in ``DecompressionStream``.
 
-The page opens on the best symmetry (:func:`best_symmetry`) beside the marginal of
-the source sample ``intrinsym render`` shows (:func:`intrinsym.viz.default_source`);
-its run panel groups sizes, seconds, BP and the main parameters (:func:`run_panel`).
+The page opens on two views of the mesh: the best symmetry (:func:`best_symmetry`), a
+few of its sample pairs marked by same-coloured discs (:func:`pair_marks`), beside the
+marginal of the source sample ``intrinsym render`` shows
+(:func:`intrinsym.viz.default_source`), the camera facing that marginal's top. Its run
+panel groups sizes, seconds, BP and the main parameters, the rest folded
+(:func:`run_panel`).
 
 Sizes: marginals are stored as uint8 per row, scaled so each row's maximum is 255 (the
 heat map is max-normalised anyway); each vertex keeps its ``k`` nearest target samples
@@ -210,8 +213,12 @@ def run_panel(result: Result, n_vertices: int) -> dict[str, dict[str, Any]]:
         **{k: v for k, v in params.items() if k not in MAIN_PARAMETERS},
     }
     return {
-        "sizes": {"|Ps|": sizes["source"], "|Pt|": sizes["target"], "edges": sizes["edges"],
-                  "mesh vertices": n_vertices},
+        "sizes": {
+            "|Ps|": sizes["source"],
+            "|Pt|": sizes["target"],
+            "edges": sizes["edges"],
+            "mesh vertices": n_vertices,
+        },
         "seconds": {**seconds, "total": sum(seconds.values())},
         "bp": {key: bp[key] for key in bp_shown},
         "parameters": {key: params.get(key) for key in MAIN_PARAMETERS},
@@ -226,8 +233,13 @@ def _symmetry_data(symmetries: Sequence[Mapping[str, Any]], vertices: np.ndarray
     return {
         "parts": pack(part_masks(shown, len(vertices))),
         "symmetries": [
-            {"rank": i + 1, "kind": s.get("kind", "?"), "score": float(s.get("score", 0.0)),
-             "n_pairs": len(s.get("pairs", [])), "marks": pair_marks(s, vertices)}
+            {
+                "rank": i + 1,
+                "kind": s.get("kind", "?"),
+                "score": float(s.get("score", 0.0)),
+                "n_pairs": len(s.get("pairs", [])),
+                "marks": pair_marks(s, vertices),
+            }
             for i, s in zip(indices, shown)
         ],
         "symmetries_note": "none: symmetries.json is absent",
