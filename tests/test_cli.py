@@ -36,8 +36,23 @@ def test_detect_trivial_weight(tmp_path):
     run_json = json.loads((out / "run.json").read_text())
     assert run_json["params"]["trivial_weight"] == 0.5 and run_json["identity"] == {"weight": 0.5}
     # auto: a threshold no BP argmax reaches keeps the identity at the fallback weight
-    assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "auto",
-                     "--isometry-threshold", "1.0"]) == 0
+    assert (
+        cli.main(
+            [
+                "detect",
+                "--example",
+                "-o",
+                str(out),
+                "-q",
+                *SMALL,
+                "--trivial-weight",
+                "auto",
+                "--isometry-threshold",
+                "1.0",
+            ]
+        )
+        == 0
+    )
     identity = json.loads((out / "run.json").read_text())["identity"]
     assert identity["isometry"] < 1.0 and identity["weight"] == intrinsym.params.NO_PARTNER_WEIGHT
     p = run("detect", "--example", "-o", tmp_path / "bad", "--trivial-weight", "some")

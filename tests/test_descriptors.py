@@ -134,8 +134,12 @@ def test_signatures_are_scale_free_after_unit_area_normalisation(mirror):
         surf = pipeline.prepare(from_arrays(v * factor, f))
         evals, evecs = eigenpairs(surf.shape.vertices, surf.shape.faces, 30)
         energies, sigma = wks_energies(evals, 30)
-        out.append((wave_kernel_signature(evals, evecs, energies, sigma),
-                    heat_kernel_signature(evals, evecs, hks_times(evals, 30))))
+        out.append(
+            (
+                wave_kernel_signature(evals, evecs, energies, sigma),
+                heat_kernel_signature(evals, evecs, hks_times(evals, 30)),
+            )
+        )
     for a, b in zip(*out, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-6)
 

@@ -274,9 +274,7 @@ def test_truncated_off(tmp_path):
         "truncated file: header declares 27894 vertices, found 120",
     )
     text = "OFF\n5 6 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in PYRAMID_V) + "3 0 1 4\n"
-    raises_one_line(
-        write(tmp_path, "short.off", text), "truncated file: header declares 6 faces, found 1"
-    )
+    raises_one_line(write(tmp_path, "short.off", text), "truncated file: header declares 6 faces, found 1")
 
 
 @pytest.mark.parametrize("ext", [".ply", ".stl"])
@@ -359,12 +357,8 @@ def test_face_index_out_of_range_in_ply(tmp_path):
 
 
 def test_fewer_than_four_points(tmp_path):
-    raises_one_line(
-        write(tmp_path, "three.xyz", "0 0 0\n1 0 0\n0 1 0\n"), "only 3 points; at least 4"
-    )
-    raises_one_line(
-        write(tmp_path, "tri.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"), "only 3 points"
-    )
+    raises_one_line(write(tmp_path, "three.xyz", "0 0 0\n1 0 0\n0 1 0\n"), "only 3 points; at least 4")
+    raises_one_line(write(tmp_path, "tri.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"), "only 3 points")
 
 
 def test_file_too_large(tmp_path):
@@ -400,3 +394,15 @@ def test_load_wolf_off():
     assert shape.vertices.shape == (4344, 3) and shape.faces.shape == (8684, 3)
     cleaned, _ = clean(shape)
     assert cleaned.faces.shape == (8684, 3)
+
+
+def test_off_with_more_faces_than_its_header_declares_is_an_error(tmp_path):
+    path = tmp_path / "extra.off"
+    path.write_text("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n")
+    with pytest.raises(
+        InputError, match=r"extra\.off: line 8: header declares 4 vertices and 1 faces, the file holds 1 more"
+    ):
+        intrinsym.load(path)
+    path.write_text("OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    with pytest.raises(InputError, match="header declares 3 vertices and 0 faces"):
+        intrinsym.load(path)

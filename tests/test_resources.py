@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from intrinsym import cli, resources
+from intrinsym import cli, make_params, resources
 from intrinsym.errors import IntrinsymError, ResourceError
 from intrinsym.resources import check_memory
 
@@ -32,4 +32,52 @@ def test_cli_reports_a_model_too_large_for_memory_in_one_line(tmp_path, monkeypa
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("intrinsym: error: ") and err.count("\n") == 1
-    assert "the model needs" in err and "of memory available" in err
+    assert "the run needs about" in err and "of memory available" in err and "lower --target" in err
+
+
+def _cgroup(tmp_path, lines, files):
+    (tmp_path / "proc").write_text("\n".join(lines) + "\n")
+    for rel, value in files.items():
+        (tmp_path / "fs" / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "fs" / rel).write_text(value)
+    return resources.cgroup_room(tmp_path / "fs", tmp_path / "proc")
+
+
+def test_cgroup_v1_limit_of_a_nested_group(tmp_path):
+    room = _cgroup(
+        tmp_path,
+        ["4:memory:/jobs/a", "3:cpu:/"],
+        {
+            "memory/memory.limit_in_bytes": "9223372036854771712",
+            "memory/jobs/memory.limit_in_bytes": "3000000000",
+            "memory/jobs/memory.usage_in_bytes": "1000000000",
+            "memory/jobs/a/memory.limit_in_bytes": "9223372036854771712",
+            "memory/jobs/a/memory.usage_in_bytes": "500000000",
+        },
+    )
+    assert room == 2_000_000_000
+
+
+def test_cgroup_v2_nested_limit_and_namespace_root(tmp_path):
+    nested = {
+        "memory.max": "max",
+        "user/memory.max": "max",
+        "user/job/memory.max": "1000000000",
+        "user/job/memory.current": "400000000",
+    }
+    assert _cgroup(tmp_path, ["0::/user/job"], nested) == 600_000_000
+    # inside a cgroup namespace the process sees "/" and the limit at the mount's root
+    assert _cgroup(tmp_path, ["0::/"], {"memory.max": "2000000000", "memory.current": "0"}) == 2_000_000_000
+    assert _cgroup(tmp_path, ["0::/"], {"memory.max": "max", "memory.current": "5"}) is None
+
+
+def test_available_memory_is_capped_by_the_cgroup(monkeypatch):
+    monkeypatch.setattr(resources, "cgroup_room", lambda: 12345)
+    assert resources.available_memory() == 12345
+
+
+def test_estimate_grows_with_the_sizes():
+    small = resources.estimate_run(30000, make_params())
+    large = resources.estimate_run(52000, make_params(n_source=2000, n_target=60000))
+    assert small.seconds < large.seconds and small.nbytes < large.nbytes
+    assert large.nbytes > 5e9 and large.seconds > 3600 and "approximate" in large.describe()

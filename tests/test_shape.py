@@ -122,9 +122,7 @@ def test_clean_point_cloud_merges_duplicates_only():
 
 def test_clean_errors_when_nothing_is_left():
     collinear = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], dtype=float)
-    with pytest.raises(
-        InputError, match=r"^line\.off: no usable faces: all 2 faces are degenerate"
-    ):
+    with pytest.raises(InputError, match=r"^line\.off: no usable faces: all 2 faces are degenerate"):
         clean(from_arrays(collinear, [[0, 1, 2], [1, 2, 3]], "line.off"))
     with pytest.raises(InputError, match="only 1 distinct points"):
         clean(from_arrays(np.ones((6, 3))))
@@ -139,9 +137,7 @@ def test_surface_area_of_cube_and_icosphere():
     box = trimesh.creation.box()
     assert surface_area(from_arrays(box.vertices, box.faces)) == pytest.approx(6.0, abs=1e-12)
     sphere = trimesh.creation.icosphere(subdivisions=4, radius=2.0)
-    assert surface_area(from_arrays(sphere.vertices, sphere.faces)) == pytest.approx(
-        16 * np.pi, rel=0.01
-    )
+    assert surface_area(from_arrays(sphere.vertices, sphere.faces)) == pytest.approx(16 * np.pi, rel=0.01)
 
 
 def test_surface_area_estimate_of_point_cloud():

@@ -14,9 +14,52 @@ sum-product belief propagation with an exact sparse message.
 from __future__ import annotations
 
 import importlib.resources
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 from ._version import __version__
+
+
+def _writable(folder: Path) -> bool:
+    """Whether a file can be created in ``folder`` (created when missing), as Numba tests it."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
+def numba_cache_dir(package: Path, environ: dict | os._Environ = os.environ) -> str | None:
+    """Where Numba should cache the compiled kernels when it cannot by itself: None when
+    ``NUMBA_CACHE_DIR`` is set or the package's ``__pycache__`` or the user's cache
+    folder (``$XDG_CACHE_HOME`` or ``~/.cache``) is writable, else a folder in the
+    system's temporary folder (a read-only install run by a user without a writable
+    home, as in containers and service accounts)."""
+    if environ.get("NUMBA_CACHE_DIR") or _writable(package / "__pycache__"):
+        return None
+    home = environ.get("HOME")
+    user_cache = environ.get("XDG_CACHE_HOME") or (str(Path(home) / ".cache") if home else None)
+    if user_cache and _writable(Path(user_cache) / "numba"):
+        return None
+    fallback = Path(tempfile.gettempdir()) / f"intrinsym-numba-cache-{os.getuid() if hasattr(os, 'getuid') else 0}"
+    return str(fallback) if _writable(fallback) else None
+
+
+def _set_numba_cache() -> None:
+    """Point Numba's cache (``cache=True`` kernels) at :func:`numba_cache_dir` when needed,
+    before Numba reads its configuration."""
+    folder = numba_cache_dir(Path(__file__).parent)
+    if folder is None:
+        return
+    os.environ["NUMBA_CACHE_DIR"] = folder
+    if "numba" in sys.modules:
+        sys.modules["numba"].config.CACHE_DIR = folder
+
+
+_set_numba_cache()
 
 
 def example_path() -> Path:
@@ -35,6 +78,17 @@ from .result import Result  # noqa: E402
 from .runinfo import RunInfo  # noqa: E402
 from .shape import Shape  # noqa: E402
 
+
+def __getattr__(name: str):
+    """``intrinsym.batch`` (:func:`intrinsym.batching.batch`), imported on first use: it
+    brings Dask and pandas."""
+    if name == "batch":
+        from .batching import batch
+
+        return batch
+    raise AttributeError(f"module 'intrinsym' has no attribute {name!r}")
+
+
 __all__ = [
     "BPIteration",
     "ExtractParams",
@@ -52,6 +106,7 @@ __all__ = [
     "StageDone",
     "Symmetry",
     "__version__",
+    "batch",
     "detect",
     "example_path",
     "load",

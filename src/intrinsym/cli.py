@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import functools
 import json
+import re
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -16,7 +19,21 @@ from rich.console import Console
 from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from . import __version__, bench, evaluate, example_path, extract, params, pipeline, shapes, viewer, viz
+from . import (
+    __version__,
+    bench,
+    evaluate,
+    example_path,
+    extract,
+    files,
+    params,
+    pipeline,
+    resources,
+    shapes,
+    viewer,
+    viz,
+)
+from .batching import command as batch_command
 from .errors import InputError, IntrinsymError, ParameterError
 from .io import load
 from .progress import BPIteration, ProgressEvent
@@ -147,6 +164,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_output_commands(sub)
 
+    bt = sub.add_parser(
+        "batch",
+        help="detect (or match) over many meshes on Dask",
+        description="detect on every mesh of INPUT... (match on pairs with --pairs) on a local Dask cluster or "
+        "a running scheduler: one folder per item in OUT, OUT/summary.parquet and summary.csv; a re-run skips "
+        "the items already done. Exit code 1 when an item failed.",
+    )
+    _add_model_options(bt, self_match=True)
+    batch_command.add_arguments(bt)
+
     e = sub.add_parser(
         "evaluate",
         help="score a saved result against a symmetry map",
@@ -211,7 +238,23 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--target", type=int, default=12722, help="|Pt| (default 12722, the paper's elephant)")
     b.add_argument("--iterations", type=int, default=100, help="maximum BP iterations (default and paper: 100)")
     b.add_argument("--json", action="store_true", help="print the results as JSON")
+    b.add_argument(
+        "--profile",
+        action="store_true",
+        help="where the time goes: seconds per stage, per BP iteration and per descriptor step, in this process",
+    )
     return parser
+
+
+def _params(args: argparse.Namespace) -> params.Params:
+    """The run's parameters; an invalid value is reported by its flag (``--source``, not ``n_source``)."""
+    try:
+        return params.make_params(args.preset, **_overrides(args))
+    except ParameterError as err:
+        text = str(err)
+        for f in params.describe():
+            text = re.sub(rf"(?<![-\w]){f.name}(?!\w)", f.flag, text)
+        raise ParameterError(text) from None
 
 
 def _overrides(args: argparse.Namespace) -> dict:
@@ -289,6 +332,10 @@ def _result_dir(path: str) -> Path:
 
 def _render_or_view(args: argparse.Namespace) -> int:
     out = _result_dir(args.out)
+    if args.command == "view" and args.html is not None:
+        files.check_output_file(args.html)
+    else:
+        files.check_output_dir(out / ("figures" if args.command == "render" else "viewer.html"))
     if args.command == "render":
         paths = viz.render(
             out,
@@ -318,7 +365,8 @@ def _generate(args: argparse.Namespace) -> int:
         )
         written = [f for frame, path in frames for f in shapes.save(frame, path)]
     except (TypeError, ValueError) as err:
-        raise ParameterError(str(err).splitlines()[0]) from None
+        text = str(err).splitlines()[0]
+        raise ParameterError(re.sub(r"^(arms|resolution|subdivisions)\b", r"--\1", text)) from None
     except OSError as err:
         raise InputError(f"{args.out}: cannot write ({err.strerror})") from None
     print("wrote " + ", ".join(map(str, written)))
@@ -331,6 +379,13 @@ def _bench(args: argparse.Namespace) -> int:
             raise InputError(f"{path}: no such file")
     if args.small == bool(args.meshes):
         raise ParameterError("bench needs MESH... or --small")
+    if args.profile:
+        for case in bench.SMALL if args.small else [bench.Case(Path(p).stem, p, 0, 0) for p in args.meshes]:
+            sizes = (case.n_source, case.n_target) if args.small else (args.source, args.target)
+            p = params.Params(n_source=sizes[0], n_target=sizes[1], iterations=args.iterations)
+            prof = bench.profile(case.mesh, p)
+            print(json.dumps(dataclasses.asdict(prof), indent=2) if args.json else "\n".join(bench.profile_lines(prof)))
+        return 0
     cases = (
         list(bench.SMALL)
         if args.small
@@ -355,6 +410,9 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.command == "batch":
+        render = functools.partial(viz.render, params=viz.FigureParams(up=args.up)) if args.figures else None
+        return batch_command.run(args, _overrides(args), render)
     if args.command == "bench":
         return _bench(args)
     if args.command == "generate":
@@ -362,18 +420,25 @@ def _run(args: argparse.Namespace) -> int:
     if args.command in ("render", "view"):
         return _render_or_view(args)
     if args.command in ("detect", "match"):
-        p = params.make_params(args.preset, **_overrides(args))
-        show = not (args.quiet or args.json) and sys.stderr.isatty()
-        progress = _Progress() if show else None
+        p = _params(args)
         if args.command == "detect" and args.example == (args.mesh is not None):
             raise ParameterError("detect needs exactly one of MESH or --example")
-        with progress or contextlib.nullcontext():
-            if args.command == "detect":
-                result = pipeline.detect(args.mesh or example_path(), p, progress=progress)
-            else:
-                result = pipeline.match(args.a, args.b, p, progress=progress)
-            out = result.save(args.out)
-            figures = viz.render(out, params=viz.FigureParams(up=args.up)) if args.figures else []
+        with files.output_lock(args.out):
+            inputs = [load(args.mesh or example_path())] if args.command == "detect" else [load(args.a), load(args.b)]
+            estimate = resources.check_run(
+                max(len(s.vertices) for s in inputs), p, str(inputs[0].path), args.command == "detect"
+            )
+            if estimate.seconds > 60 and not args.quiet:
+                print(f"intrinsym: this run takes {estimate.describe()}", file=sys.stderr)
+            show = not (args.quiet or args.json) and sys.stderr.isatty()
+            progress = _Progress() if show else None
+            with progress or contextlib.nullcontext():
+                if args.command == "detect":
+                    result = pipeline.detect(inputs[0], p, progress=progress)
+                else:
+                    result = pipeline.match(inputs[0], inputs[1], p, progress=progress)
+                out = result.save(args.out)
+                figures = viz.render(out, params=viz.FigureParams(up=args.up)) if args.figures else []
         summary = _summary(result, out)
         summary["symmetries"] = len(viz.load_symmetries(out))
         summary["figures"] = [path.name for path in figures]
@@ -468,17 +533,33 @@ def _query(args: argparse.Namespace, result: Result, out: Path) -> int:
     return 0
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so that it unwinds as on Ctrl-C (temporary
+    files removed, the progress display stopped)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``intrinsym`` command; returns the exit code."""
+    """Entry point of the ``intrinsym`` command; returns the exit code (2 for a user
+    error, 130 on Ctrl-C, 143 on SIGTERM)."""
     args = build_parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return _run(args)
     except IntrinsymError as err:
         print(f"intrinsym: error: {err}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("intrinsym: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("intrinsym: interrupted", file=sys.stderr)
         return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,8 @@ import scipy.sparse as sp
 from numba import njit, prange
 from scipy.sparse.linalg import eigsh
 
+from .errors import ParameterError
+
 #: Largest number of cells a uniform grid may address (cell keys are int64).
 _MAX_GRID_CELLS = 2**62
 #: Grid cells per support radius: each query scans the (2 * reach + 1)^3 block of cells
@@ -456,6 +458,35 @@ def eigenpairs(vertices: np.ndarray, faces: np.ndarray | None, k: int) -> tuple[
     return np.maximum(evals[order], 0.0), evecs[:, order]
 
 
+def constant_modes(evals: np.ndarray) -> int:
+    """The number of zero eigenvalues at the start of ``evals``: one per connected
+    component (its constant function), zero up to rounding (below 1e-8 of the largest).
+
+    Parameters
+    ----------
+    evals : (K,) float array
+        Ascending eigenvalues of :func:`eigenpairs`.
+
+    Returns
+    -------
+    int
+        At least 1.
+
+    Raises
+    ------
+    ParameterError
+        When no eigenvalue is non-zero: the shape has at least as many connected
+        components as eigenpairs.
+    """
+    c = max(int(np.count_nonzero(evals <= 1e-8 * evals[-1])), 1)
+    if c >= len(evals):
+        raise ParameterError(
+            f"the shape has at least {len(evals)} connected components, as many as the Laplace-Beltrami "
+            "eigenpairs: raise --eigenpairs above their number or use --unary spin"
+        )
+    return c
+
+
 def wks_energies(evals: np.ndarray, n_energies: int = 100, variance: float = 6.0) -> tuple[np.ndarray, float]:
     """Log-energy grid and bandwidth of the wave-kernel signature (Aubry et al. 2011).
 
@@ -466,7 +497,8 @@ def wks_energies(evals: np.ndarray, n_energies: int = 100, variance: float = 6.0
     Parameters
     ----------
     evals : (K,) float array
-        Ascending eigenvalues (1 / length^2), the first one the constant mode.
+        Ascending eigenvalues (1 / length^2), the first the constant modes (one per
+        connected component, see :func:`constant_modes`).
     n_energies : int
     variance : float
         Bandwidth in grid steps (Aubry et al.: 6).
@@ -478,7 +510,7 @@ def wks_energies(evals: np.ndarray, n_energies: int = 100, variance: float = 6.0
     sigma : float
         Gaussian bandwidth in log-energy.
     """
-    lo, hi = np.log(evals[1]), np.log(evals[-1])
+    lo, hi = np.log(evals[constant_modes(evals)]), np.log(evals[-1])
     sigma = variance * (hi - lo) / n_energies
     return np.linspace(lo + 2 * sigma, hi - 2 * sigma, n_energies), float(sigma)
 
@@ -496,7 +528,8 @@ def wave_kernel_signature(evals: np.ndarray, evecs: np.ndarray, energies: np.nda
     Parameters
     ----------
     evals : (K,) float array
-        Ascending eigenvalues, the first the constant mode (skipped).
+        Ascending eigenvalues, the first the constant modes (skipped, see
+        :func:`constant_modes`).
     evecs : (P, K) float array
         Eigenfunctions at the P points of interest (rows of :func:`eigenpairs`' evecs).
     energies : (E,) float array
@@ -508,9 +541,10 @@ def wave_kernel_signature(evals: np.ndarray, evecs: np.ndarray, energies: np.nda
     -------
     (P, E) float64, ``log WKS``; for unit-area shapes scale-free.
     """
-    log_lam = np.log(np.maximum(evals[1:], np.finfo(np.float64).tiny))
+    c = constant_modes(evals)
+    log_lam = np.log(evals[c:])
     coef = np.exp(-((energies[:, None] - log_lam[None, :]) ** 2) / (2.0 * sigma**2))
-    wks = (evecs[:, 1:] ** 2) @ coef.T / coef.sum(axis=1)
+    wks = (evecs[:, c:] ** 2) @ coef.T / coef.sum(axis=1)
     return np.log(np.maximum(wks, np.finfo(np.float64).tiny))
 
 
@@ -525,7 +559,7 @@ def hks_times(evals: np.ndarray, n_times: int = 100) -> np.ndarray:
     (n_times,) float64, times in length^2.
     """
     c = 4.0 * np.log(10.0)
-    return np.geomspace(c / evals[-1], c / evals[1], n_times)
+    return np.geomspace(c / evals[-1], c / evals[constant_modes(evals)], n_times)
 
 
 def heat_kernel_signature(evals: np.ndarray, evecs: np.ndarray, times: np.ndarray) -> np.ndarray:

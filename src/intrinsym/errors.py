@@ -59,6 +59,26 @@ class ParameterError(IntrinsymError, ValueError):
     """An invalid parameter value or combination (a user error, reported in one line)."""
 
 
+class OutputError(IntrinsymError):
+    """An output that cannot be written (a file where a folder should be, no permission,
+    a read-only file system, another run writing the same folder).
+
+    ``str(err)`` is one line starting with the output's name; raised before any work
+    when the command line checks its outputs.
+    """
+
+    def __init__(self, message: str) -> None:
+        super().__init__(_join_lines(message))
+
+
+class ResultError(IntrinsymError):
+    """A result folder that cannot be read (a missing, truncated or corrupt file);
+    ``str(err)`` is one line naming the file."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(_join_lines(message))
+
+
 class ResourceError(IntrinsymError):
     """A job that needs more of the machine (memory) than it has.
 

@@ -284,6 +284,12 @@ def read_off(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     if len(lines) < stop:
         raise InputError(f"{label}: truncated file: header declares {n_vertices} vertices, found {len(lines) - body}")
     vertices = _parse_points(numbers[body:stop], lines[body:stop], label, "vertex")
+    if len(lines) > stop + n_faces:
+        extra = len(lines) - stop - n_faces
+        raise InputError(
+            f"{label}: line {numbers[stop + n_faces]}: header declares {n_vertices} vertices and {n_faces} faces, "
+            f"the file holds {extra} more line(s)"
+        )
     if n_faces == 0:
         return vertices, None
     if len(lines) < stop + n_faces:

@@ -8,16 +8,24 @@ of failing later with a ``MemoryError`` or being killed by the operating system.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from .errors import ResourceError, path_label
+
+if TYPE_CHECKING:
+    from .params import Params
 
 
 def available_memory() -> int | None:
     """Bytes of memory this process can still use, or None if unknown.
 
     Uses Linux's ``MemAvailable`` (free memory plus reclaimable cache), capped
-    by a cgroup v2 memory limit when one is set, and falls back to
+    by the memory limits of this process's cgroup and its ancestors (v1 or v2,
+    :func:`cgroup_room`), and falls back to
     ``os.sysconf`` (available, then total physical pages) elsewhere.
     """
     avail = None
@@ -38,15 +46,93 @@ def available_memory() -> int | None:
             if pages > 0 and page_size > 0:
                 avail = pages * page_size
                 break
-    try:
-        limit = Path("/sys/fs/cgroup/memory.max").read_text(encoding="ascii").strip()
-        used = Path("/sys/fs/cgroup/memory.current").read_text(encoding="ascii").strip()
-        if limit != "max":
-            room = max(int(limit) - int(used), 0)
-            avail = room if avail is None else min(avail, room)
-    except (OSError, ValueError):
-        pass
+    room = cgroup_room()
+    if room is not None:
+        avail = room if avail is None else min(avail, room)
     return avail
+
+
+#: Where the cgroup file systems are mounted, and this process's cgroup membership.
+CGROUP_ROOT = Path("/sys/fs/cgroup")
+PROC_CGROUP = Path("/proc/self/cgroup")
+#: A cgroup-v1 limit at or above this means "no limit" (the kernel's unlimited value is ~2**63).
+_UNLIMITED = 2**60
+
+
+def _read_int(path: Path) -> int | None:
+    """The integer in a cgroup file; None when absent, unreadable or "max"."""
+    try:
+        text = path.read_text(encoding="ascii").strip()
+        return None if text == "max" else int(text)
+    except (OSError, ValueError):
+        return None
+
+
+def _room_along(leaf: Path, top: Path, limit_file: str, usage_file: str) -> int | None:
+    """The least room (limit - usage) of the cgroups from ``leaf`` up to ``top``."""
+    room = None
+    folder = leaf
+    while True:
+        limit, used = _read_int(folder / limit_file), _read_int(folder / usage_file)
+        if limit is not None and limit < _UNLIMITED:
+            here = max(limit - (used or 0), 0)
+            room = here if room is None else min(room, here)
+        if folder == top or top not in folder.parents:
+            return room
+        folder = folder.parent
+
+
+def cgroup_room(root: Path | None = None, proc_cgroup: Path | None = None) -> int | None:
+    """Bytes this process may still allocate under its cgroups' memory limits.
+
+    Reads the process's cgroup from ``/proc/self/cgroup`` and walks from it up to the
+    hierarchy's root: cgroup v2 ``memory.max`` / ``memory.current``, cgroup v1
+    ``memory.limit_in_bytes`` / ``memory.usage_in_bytes`` (the memory controller's
+    mount, e.g. ``/sys/fs/cgroup/memory``). A nested group's limit counts as much as
+    the top one's; the least room wins.
+
+    Parameters
+    ----------
+    root : Path, optional
+        Where the cgroup file systems are mounted (default :data:`CGROUP_ROOT`).
+    proc_cgroup : Path, optional
+        The membership file (default :data:`PROC_CGROUP`).
+
+    Returns
+    -------
+    int or None
+        None when no limit is set or none can be read.
+    """
+    root = CGROUP_ROOT if root is None else root
+    proc_cgroup = PROC_CGROUP if proc_cgroup is None else proc_cgroup
+    try:
+        lines = proc_cgroup.read_text(encoding="utf-8").splitlines()
+    except OSError:
+        lines = []
+    rooms = []
+    for line in lines:
+        parts = line.split(":", 2)
+        if len(parts) != 3:
+            continue
+        _, controllers, group = parts
+        relative = group.strip().lstrip("/")
+        if controllers == "":
+            top, files = root, ("memory.max", "memory.current")
+        elif "memory" in controllers.split(","):
+            mounts = [root / "memory", root / controllers]
+            top = next((m for m in mounts if m.is_dir()), mounts[0])
+            files = ("memory.limit_in_bytes", "memory.usage_in_bytes")
+        else:
+            continue
+        leaf = top / relative if (top / relative).is_dir() else top  # a namespace shows "/"
+        room = _room_along(leaf, top, *files)
+        if room is not None:
+            rooms.append(room)
+    if not lines:
+        room = _room_along(root, root, "memory.max", "memory.current")
+        if room is not None:
+            rooms.append(room)
+    return min(rooms) if rooms else None
 
 
 def format_bytes(nbytes: float) -> str:
@@ -88,3 +174,97 @@ def check_memory(nbytes: int, what: str, path: str = "") -> None:
             f"{path_label(path)}: {what} needs {nbytes / 1e9:.1f} GB, more than the "
             f"{usable / 1e9:.1f} GB of memory available"
         )
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Approximate peak memory and time of a run (:func:`estimate_run`).
+
+    Attributes
+    ----------
+    nbytes : int
+        Peak memory, bytes.
+    seconds : float
+        Wall-clock time on a 2-core machine (AMD EPYC), seconds.
+    n_source, n_target : int
+        The sample counts assumed.
+    """
+
+    nbytes: int
+    seconds: float
+    n_source: int
+    n_target: int
+
+    def describe(self) -> str:
+        """One line: "about 12 min and 3.4 GB (|Ps| = 2000, |Pt| = 60000; approximate)"."""
+        t = self.seconds
+        when = f"{t / 3600:.1f} h" if t >= 5400 else f"{t / 60:.0f} min" if t >= 90 else f"{t:.0f} s"
+        return (
+            f"about {when} and {format_bytes(self.nbytes)} (|Ps| = {self.n_source}, |Pt| = {self.n_target}; "
+            "approximate, from a model of the stage times on a 2-core machine)"
+        )
+
+
+def _count(n: int | None, spacing: float | None) -> int:
+    """Samples of a unit-area surface: the count, or the hexagonal packing of ``spacing``."""
+    if n is not None and spacing is None:
+        return n
+    assert spacing is not None
+    return max(int(2.0 / (np.sqrt(3.0) * spacing**2)), 2)
+
+
+def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimate:
+    """Approximate peak memory and time of a run of ``p`` on a mesh of ``n_vertices``.
+
+    A model of the measured stages (TOSCA runs at |Ps| = 250, |Pt| = 4000 and the
+    scaling of each stage): the working shape, subdivided to 3 max(|Ps|, |Pt|) vertices
+    when coarser, costs about 0.3 ms and 2 kB per vertex (cleaning, geodesic graph,
+    eigenpairs, ZoomOut); the descriptors 10 us and 8 bytes per source-target pair and
+    unary term; BP holds 6 (plus 2 per further pass) float32 |Ps| x |Pt| arrays and 2
+    messages of |Pt| per source edge (about 3 |Ps| edges), plus the target rings
+    (about 23 |Pt| / |Ps| neighbours per target), and one iteration costs about
+    0.16 us |Pt|^2, for at most 30 iterations per pass. Within a factor of about 2.
+
+    Parameters
+    ----------
+    n_vertices : int
+        Vertices of the (larger) input mesh.
+    p : Params
+    self_match : bool
+        detect (True) or match (False: two passes by default, both shapes' descriptors).
+
+    Returns
+    -------
+    Estimate
+    """
+    s = _count(p.n_source, p.source_spacing)
+    t = _count(p.n_target, p.target_spacing)
+    passes = p.passes if p.passes is not None else 1 if self_match else 2
+    work = max(n_vertices, 3 * max(s, t))
+    terms = len(p.unary_terms) * (1 if self_match else 2)
+    itemsize = np.dtype(p.dtype).itemsize
+    model = (6 + 2 * (passes - 1)) * s * t * 4 + 2 * 3 * s * t * itemsize + 272 * t * t // s
+    unary = (terms + 1) * s * t * 8 + t * p.spin_bins**2 * 3 + 48 * p.spin_cloud
+    nbytes = int(2000 * work + model + unary)
+    seconds = 3e-4 * work + 1e-5 * s * t * terms + passes * min(p.iterations, 30) * 1.6e-7 * t * t
+    return Estimate(nbytes, float(seconds), s, t)
+
+
+def check_run(n_vertices: int, p: Params, path: str = "", self_match: bool = True) -> Estimate:
+    """:func:`estimate_run`, refusing a run whose estimate does not fit in memory.
+
+    Raises
+    ------
+    ResourceError
+        When the estimate exceeds 80% of the memory available (:func:`available_memory`,
+        cgroup limits included), naming the estimate and the options that lower it.
+    """
+    estimate = estimate_run(n_vertices, p, self_match)
+    avail = available_memory()
+    if avail is not None and estimate.nbytes > 0.8 * avail:
+        raise ResourceError(
+            f"{path_label(path)}: the run needs {estimate.describe()}, more than the "
+            f"{format_bytes(0.8 * avail)} of memory available; lower --target, then --source "
+            "(or raise --target-spacing, --source-spacing)"
+        )
+    return estimate

@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, cast
@@ -17,12 +19,17 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
+from .confidence import map_mass
+from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
-from .files import atomic_write
+from .files import Writer, write_set
 from .params import Params
 from .runinfo import RunInfo
 from .support import Support
 from .vertex_maps import fitted_vertex_map
+
+#: What reading a truncated or corrupt result file raises.
+_UNREADABLE = (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile, zlib.error)
 
 #: Version-1 name of each renamed ``result.npz`` array.
 V1_ARRAYS = {
@@ -79,6 +86,14 @@ class Result:
     zoomout_map: np.ndarray | None = None
     pass_marginals: np.ndarray | None = None
 
+    #: Every file of the result set (:meth:`save` writes those the result has).
+    FILES: ClassVar[tuple[str, ...]] = (
+        "result.npz",
+        "run.json",
+        "symmetries.json",
+        "symmetry_map.npy",
+        "symmetry_mass.npy",
+    )
     ARRAYS: ClassVar[tuple[str, ...]] = (
         "source_points",
         "target_points",
@@ -131,17 +146,18 @@ class Result:
         """(N_in,) int64: the image of every input vertex under the global symmetry
         (``symmetry_map.npy``), -1 everywhere when there is none.
 
-        The ZoomOut map when the run made one (``zoomout_map``), else the extraction's
-        (:func:`intrinsym.vertex_maps.fitted_vertex_map`). Needs ``support`` and
-        ``extraction``.
+        The global map the run chose (``zoomout_map``,
+        :func:`intrinsym.globalmap.choose_global_map`) when it made one, else the
+        extraction's (:func:`intrinsym.vertex_maps.fitted_vertex_map`). Needs ``support``
+        and ``extraction``.
         """
         if self.support is None or self.extraction is None:
             raise ValueError("the result has no extraction")
+        if self.zoomout_map is not None:
+            return np.asarray(self.zoomout_map, dtype=np.int64)
         sym = self.extraction.global_symmetry
         if sym is None:
             return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
-        if self.zoomout_map is not None:
-            return np.asarray(self.zoomout_map, dtype=np.int64)
         return fitted_vertex_map(
             sym,
             self.support,
@@ -152,15 +168,32 @@ class Result:
             self.extraction.params,
         )
 
+    def symmetry_mass(self) -> np.ndarray:
+        """(N_in,) float32 in [0, 1]: per input vertex, the marginal mass within
+        ``params.mass_radius`` of its image under :meth:`symmetry_map`
+        (``symmetry_mass.npy``, :func:`intrinsym.confidence.map_mass`): high where the
+        marginals support the map, low where they do not; not a calibrated probability."""
+        if self.support is None:
+            raise ValueError("the result has no support")
+        return map_mass(
+            self.marginals,
+            self.symmetry_map(),
+            self.source_point_vertex,
+            self.support,
+            self.params.mass_radius,
+        )
+
     def run_json(self) -> dict[str, Any]:
         """``run.json``'s content: the parameters and :class:`RunInfo`."""
         return {"params": dataclasses.asdict(self.params), **self.info.to_dict()}
 
     def save(self, out_dir: str | os.PathLike) -> Path:
-        """Write ``out_dir/result.npz`` and ``out_dir/run.json`` (atomically), and with an
-        extraction ``symmetries.json`` and ``symmetry_map.npy``."""
+        """Write ``out_dir/result.npz`` and ``out_dir/run.json``, and with an extraction
+        ``symmetries.json`` and ``symmetry_map.npy``, as one set
+        (:func:`intrinsym.files.write_set`: the previous set stays whole until the new
+        one replaces it; another process writing ``out_dir`` at the same time is refused
+        with :class:`~intrinsym.errors.OutputError`)."""
         out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
         arrays = {name: getattr(self, name) for name in self.ARRAYS}
         if self.support is not None:
             arrays.update(self.support.to_arrays())
@@ -169,42 +202,67 @@ class Result:
         if self.pass_marginals is not None:
             arrays["pass_marginals"] = np.asarray(self.pass_marginals, dtype=np.float32)
         run = self.run_json()
-        atomic_write(out / "result.npz", lambda f: np.savez_compressed(f, **arrays), binary=True)
-        atomic_write(out / "run.json", lambda f: json.dump(run, f, indent=2))
+
+        def write_json(content: Any, indent: int | None = None) -> Writer:
+            def write(path: Path) -> None:
+                path.write_text(json.dumps(content, indent=indent))
+
+            return write
+
+        writers: dict[str, Writer] = {
+            "result.npz": lambda path: np.savez_compressed(path, **arrays),
+            "run.json": write_json(run, indent=2),
+        }
         if self.support is not None and self.extraction is not None:
             listed = records.records(
                 self.extraction.symmetries, self.source_point_vertex, self.target_point_vertex, self.support
             )
-            atomic_write(out / "symmetries.json", lambda f: json.dump(listed, f))
             vmap = self.symmetry_map()
-            atomic_write(out / "symmetry_map.npy", lambda f: np.save(f, vmap), binary=True)
+            writers["symmetries.json"] = write_json(listed)
+            writers["symmetry_map.npy"] = lambda path: np.save(path, vmap)
+            mass = self.symmetry_mass()
+            writers["symmetry_mass.npy"] = lambda path: np.save(path, mass)
+        write_set(out, writers, owned=self.FILES)
         return out
 
     @classmethod
     def load(cls, out_dir: str | os.PathLike) -> Result:
         """Read a result folder written by :meth:`save` (format version 1 or 2). The
-        extraction is not stored; rerun it with :func:`intrinsym.pipeline.extract_result`."""
+        extraction is not stored; rerun it with :func:`intrinsym.pipeline.extract_result`.
+
+        Raises
+        ------
+        ResultError
+            A file missing, truncated or corrupt (one line naming it).
+        """
         out = Path(out_dir)
-        with np.load(out / "result.npz") as z:
+        name = out / "result.npz"
+        try:
+            with np.load(name) as z:
 
-            def get(name: str) -> np.ndarray | None:
-                for key in (name, V1_ARRAYS.get(name)):
-                    if key is not None and key in z.files:
-                        return z[key]
-                return None
+                def get(key: str) -> np.ndarray | None:
+                    for k in (key, V1_ARRAYS.get(key)):
+                        if k is not None and k in z.files:
+                            return z[k]
+                    return None
 
-            arrays = {name: get(name) for name in cls.ARRAYS}
-            missing = [name for name, value in arrays.items() if value is None]
-            if missing:
-                raise KeyError(f"{out / 'result.npz'} lacks {', '.join(missing)}")
-            support = Support.from_arrays(z) if Support.stored_in(z.files) else None
-            zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
-        run = json.loads((out / "run.json").read_text())
-        params = Params(**run.pop("params"))
+                arrays = {key: get(key) for key in cls.ARRAYS}
+                missing = [key for key, value in arrays.items() if value is None]
+                if missing:
+                    raise ResultError(f"{name}: lacks {', '.join(missing)}")
+                support = Support.from_arrays(z) if Support.stored_in(z.files) else None
+                zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
+            name = out / "run.json"
+            run = json.loads(name.read_text())
+            params = Params(**run.pop("params"))
+            info = RunInfo.from_dict(run)
+        except _UNREADABLE as err:
+            reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"
+            raise ResultError(f"{name}: cannot read it ({reason}); run intrinsym detect again") from None
         return cls(
             **cast(dict[str, Any], arrays),
             params=params,
-            info=RunInfo.from_dict(run),
+            info=info,
             support=support,
             zoomout_map=zoomout_map,
             pass_marginals=pass_marginals,

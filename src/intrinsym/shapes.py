@@ -35,6 +35,10 @@ from scipy.spatial import cKDTree
 from .files import atomic_write
 
 NAMES = ("cuboctahedron", "star", "lantern", "figure", "partial")
+#: Accepted range of each option of :func:`generate`: the cuboctahedron has about
+#: 64 4^subdivisions vertices (6: 262146, and 47 maps of them), the others about
+#: arms x resolution^2 x 20.
+LIMITS = {"subdivisions": (0, 6), "resolution": (2, 100), "arms": (2, 32)}
 
 
 @dataclass(frozen=True)
@@ -436,6 +440,10 @@ def generate(name: str, **options) -> GeneratedShape | tuple[GeneratedShape, Gen
     }
     if name not in builders:
         raise ValueError(f"unknown shape {name!r}; expected one of {', '.join(NAMES)}")
+    for option, value in options.items():
+        low, high = LIMITS.get(option, (None, None))
+        if low is not None and high is not None and not low <= value <= high:
+            raise ValueError(f"{option} must lie in [{low}, {high}], got {value} (the size grows with it)")
     return builders[name](**options)
 
 

@@ -1,0 +1,195 @@
+"""The command line under hostile conditions: outputs that cannot be written, bad
+parameters, corrupt result folders, SIGTERM, a read-only install, memory limits."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import intrinsym
+from intrinsym import cli, files, pipeline, resources
+from intrinsym.errors import OutputError, ResultError
+
+SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
+SRC = Path(intrinsym.__file__).parent
+
+
+def one_line_error(capsys, code, *words):
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("intrinsym: error: ") and err.count("\n") == 1, err
+    for word in words:
+        assert word in err, err
+    return err
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Fail the test if the pipeline starts."""
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the pipeline ran before the output was checked")
+
+    monkeypatch.setattr(pipeline, "detect", refuse)
+    monkeypatch.setattr(pipeline, "match", refuse)
+
+
+@pytest.fixture(scope="module")
+def result_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("res") / "out"
+    assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL]) == 0
+    return out
+
+
+@pytest.mark.parametrize("where", ["file", "below_file", "unwritable"])
+def test_detect_checks_its_output_before_any_work(tmp_path, capsys, monkeypatch, no_work, where):
+    (tmp_path / "f").write_text("")
+    out = {"file": tmp_path / "f", "below_file": tmp_path / "f" / "out", "unwritable": tmp_path / "ro" / "out"}[where]
+    if where == "unwritable":
+        monkeypatch.setattr(
+            files.tempfile, "mkstemp", lambda **kw: (_ for _ in ()).throw(OSError(30, "Read-only file system"))
+        )
+    one_line_error(capsys, cli.main(["detect", "--example", "-o", str(out), *SMALL]), str(out))
+
+
+def test_result_save_refuses_a_file_as_folder(tmp_path, result_dir):
+    (tmp_path / "f").write_text("")
+    with pytest.raises(OutputError, match="exists and is not a folder"):
+        intrinsym.Result.load(result_dir).save(tmp_path / "f")
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--seed", "-1"], "--seed must be at least 0"),
+        (["--source", "0"], "--source must be at least 2"),
+        (["--source-spacing", "0"], "--source-spacing must be positive"),
+        (["--calibration-k", "100000"], "--calibration-k must be at most --target"),
+        (["--spin-cloud", "0"], "--spin-cloud must lie in"),
+        (["--gamma", "inf"], "--gamma must be a finite number"),
+        (["--rho", "nan"], "--rho must be a finite number"),
+        (["--eigenpairs", "100000"], "--eigenpairs must lie in [2, 1000]"),
+        (["--zoomout-seed", "60"], "need 1 <= --zoomout-seed <= --zoomout-final"),
+    ],
+)
+def test_parameters_are_checked_before_any_work_and_named_by_flag(tmp_path, capsys, no_work, args, message):
+    out = tmp_path / "out"
+    one_line_error(capsys, cli.main(["detect", "--example", "-o", str(out), *args]), message)
+    assert not out.exists()
+
+
+def _corrupt(src: Path, dst: Path, name: str, how: str) -> None:
+    shutil.copytree(src, dst)
+    data = (dst / name).read_bytes()
+    (dst / name).write_bytes(data[: len(data) // 2] if how == "truncate" else b"\0" * len(data))
+
+
+@pytest.mark.parametrize("name", ["result.npz", "run.json"])
+@pytest.mark.parametrize("how", ["truncate", "zero"])
+def test_corrupt_result_folders_give_one_line_errors(tmp_path, capsys, result_dir, name, how):
+    out = tmp_path / "bad"
+    _corrupt(result_dir, out, name, how)
+    with pytest.raises(ResultError, match=name):
+        intrinsym.Result.load(out)
+    sym = tmp_path / "sym.npy"
+    np.save(sym, np.arange(len(intrinsym.load(intrinsym.example_path()).vertices)))
+    for argv in (
+        ["query", str(out), "--vertex", "0"],
+        ["evaluate", str(out), "--symmetry-map", str(sym)],
+        ["render", str(out)],
+        ["view", str(out)],
+    ):
+        one_line_error(capsys, cli.main(argv), name)
+
+
+def test_view_to_a_missing_folder_is_a_one_line_error(tmp_path, capsys, result_dir):
+    one_line_error(capsys, cli.main(["view", str(result_dir), "-o", str(tmp_path / "missing" / "v.html")]), "v.html")
+
+
+def test_sigterm_is_handled_like_ctrl_c(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "intrinsym.cli",
+            "detect",
+            "--example",
+            "-o",
+            str(out),
+            "--source",
+            "200",
+            "--target",
+            "3000",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    lock = tmp_path / ".out.lock"
+    deadline = time.monotonic() + 120
+    while not lock.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "intrinsym: terminated"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no result, no temporary, no lock
+
+
+def test_generate_refuses_sizes_that_do_not_fit(tmp_path, capsys):
+    code = cli.main(["generate", "cuboctahedron", "--subdivisions", "12", "-o", str(tmp_path / "c.off")])
+    one_line_error(capsys, code, "--subdivisions must lie in [0, 6]")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_numba_cache_falls_back_without_a_writable_home_or_install(tmp_path):
+    copy = tmp_path / "ro"
+    shutil.copytree(SRC, copy / "intrinsym", ignore=shutil.ignore_patterns("__pycache__"))
+    (copy / "intrinsym" / "__pycache__").write_text("")  # the install's cache folder cannot be made
+    (tmp_path / "file").write_text("")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+    env.update(HOME=str(tmp_path / "file" / "home"), PYTHONPATH=str(copy), TMPDIR=str(tmp_path))
+    code = "import os, intrinsym, intrinsym.descriptors; print(intrinsym.__file__, os.environ['NUMBA_CACHE_DIR'])"
+    p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    where, cache = p.stdout.split()
+    assert where.startswith(str(copy)) and cache.startswith(str(tmp_path))
+
+
+def test_numba_cache_left_alone_when_the_install_is_writable(tmp_path):
+    assert intrinsym.numba_cache_dir(tmp_path, {}) is None
+    (tmp_path / "file").write_text("")
+    blocked = tmp_path / "file" / "pkg"
+    assert intrinsym.numba_cache_dir(blocked, {"NUMBA_CACHE_DIR": "/x"}) is None
+    assert intrinsym.numba_cache_dir(blocked, {"HOME": str(tmp_path)}) is None  # ~/.cache works
+    assert intrinsym.numba_cache_dir(blocked, {"HOME": str(blocked)}) is not None
+
+
+def test_a_run_that_cannot_fit_is_refused_before_any_work(tmp_path, capsys, monkeypatch, no_work):
+    monkeypatch.setattr(resources, "available_memory", lambda: 10**9)
+    argv = ["detect", "--example", "-o", str(tmp_path / "out"), "--source", "2000", "--target", "60000"]
+    one_line_error(capsys, cli.main(argv), "the run needs about", "GB", "lower --target")
+
+
+def test_a_long_run_prints_its_estimate_first(tmp_path, capsys, monkeypatch):
+    def stop(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline, "detect", stop)
+    assert cli.main(["detect", "--example", "-o", str(tmp_path / "out"), "--source", "500", "--target", "20000"]) == 130
+    err = capsys.readouterr().err
+    assert "intrinsym: this run takes about" in err and "approximate" in err
+
+
+@pytest.mark.parametrize("name", ["scores.json", "symmetries.json"])
+def test_corrupt_side_files_give_one_line_errors(tmp_path, capsys, result_dir, name):
+    out = tmp_path / "bad"
+    shutil.copytree(result_dir, out)
+    (out / name).write_text('{"cut')
+    one_line_error(capsys, cli.main(["view", str(out)]), name)
