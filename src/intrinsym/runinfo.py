@@ -151,6 +151,26 @@ class ZoomOutStats:
 
 
 @dataclass(frozen=True)
+class GlobalMapStats:
+    """How the global map was chosen (:func:`intrinsym.globalmap.choose_global_map`).
+
+    Attributes
+    ----------
+    source : str
+        The winning candidate: "extraction", "zoomout" or "spectral".
+    mass : float
+        Marginal mass the global map keeps, in [0, 1] (:func:`intrinsym.confidence.kept_mass`;
+        not a calibrated probability).
+    masses : dict of str to float
+        Kept mass of every candidate tried.
+    """
+
+    source: str
+    mass: float
+    masses: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class RunInfo:
     """Everything ``run.json`` records besides the parameters.
 
@@ -169,7 +189,11 @@ class RunInfo:
     bp : BPStats
     identity : IdentityDecision or None
     zoomout : ZoomOutStats or None
+    global_map : GlobalMapStats or None
     versions : dict of str to str
+    content_key : str or None
+        Hash of the input bytes, the resolved parameters and the package version
+        (``intrinsym batch`` skips an item whose folder holds its key).
     """
 
     mode: str
@@ -182,7 +206,9 @@ class RunInfo:
     target_input: str | None = None
     identity: IdentityDecision | None = None
     zoomout: ZoomOutStats | None = None
+    global_map: GlobalMapStats | None = None
     versions: dict[str, str] = field(default_factory=dict)
+    content_key: str | None = None
 
     @property
     def no_partner(self) -> bool:
@@ -209,6 +235,7 @@ class RunInfo:
         bp["passes"] = tuple(PassStats(**q) for q in bp.get("passes", ()))
         identity = run.get("identity")
         zoomout = run.get("zoomout")
+        global_map = run.get("global_map")
         return cls(
             mode=run["mode"],
             input=run["input"],
@@ -220,7 +247,9 @@ class RunInfo:
             bp=BPStats(**bp),
             identity=IdentityDecision(**identity) if identity else None,
             zoomout=ZoomOutStats(**zoomout) if zoomout else None,
+            global_map=GlobalMapStats(**global_map) if global_map else None,
             versions=dict(run.get("versions", {})),
+            content_key=run.get("content_key"),
         )
 
 

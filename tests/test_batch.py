@@ -1,0 +1,287 @@
+"""``intrinsym batch`` on a real Dask cluster (two worker processes on loopback): the
+results are those of ``detect``, a corrupt file is a failed row, a killed worker's item
+is run again and reported once, an interrupted batch resumes without redoing what it
+finished, a separately started ``dask scheduler`` + ``dask worker`` serves the same
+batch, and pairs mode runs ``match`` over the Sumner horse frames."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import distributed
+import numpy as np
+import pandas as pd
+import pytest
+
+import intrinsym
+from conftest import shared
+from intrinsym import Params, Result, shapes
+from intrinsym.batching import engine, items
+from intrinsym.cli import main
+
+#: Tiny sizes: every item takes seconds.
+TINY = {"n_source": 20, "n_target": 200, "spin_cloud": 2000, "iterations": 5}
+TINY_FLAGS = ["--source", "20", "--target", "200", "--spin-cloud", "2000", "--iterations", "5"]
+PARAMS = Params(**TINY)
+#: Environment of every process started here: one thread each (two cores in CI).
+ONE_THREAD = engine.thread_environment(1)
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Two generated shapes with their symmetry maps, the shipped example and a corrupt file."""
+    folder = tmp_path_factory.mktemp("meshes")
+    shapes.save(shapes.cuboctahedron(subdivisions=2), folder / "cubo.off")
+    shapes.save(shapes.star(resolution=6), folder / "star.off")
+    shutil.copy(intrinsym.example_path(), folder / "spot.obj")
+    (folder / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n1 0\n")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A LocalCluster of two single-threaded worker processes on loopback."""
+    import dask
+
+    with dask.config.set({"distributed.scheduler.allowed-failures": engine.ALLOWED_FAILURES}):
+        with distributed.LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            env=ONE_THREAD,
+            dashboard_address=":0",
+            silence_logs=40,
+        ) as c:
+            yield c
+
+
+@pytest.fixture(scope="module")
+def by_path(meshes: Path, cluster, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, pd.DataFrame]:
+    out = tmp_path_factory.mktemp("by_path")
+    frame = intrinsym.batch([str(meshes)], out, PARAMS, scheduler=cluster.scheduler_address, transport="path")
+    return out, frame
+
+
+def _mtimes(folder: Path) -> dict[str, int]:
+    return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+
+
+def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path, meshes: Path, tmp_path: Path) -> None:
+    out, frame = by_path
+    assert sorted(frame["name"]) == ["broken", "cubo", "spot", "star"]
+    rows = frame.set_index("name")
+    assert rows.loc["broken", "status"] == "failed" and "broken.off" in rows.loc["broken", "error"]
+    assert rows.loc["spot", "status"] == "done", rows.loc["spot", "error"]
+    for name, mesh in (("cubo", "cubo.off"), ("star", "star.off")):
+        assert rows.loc[name, "status"] == "done", rows.loc[name, "error"]
+        saved = Result.load(out / name)
+        alone = tmp_path / name  # `intrinsym detect` with the workers' threads (BLAS sums depend on them)
+        command = [sys.executable, "-m", "intrinsym", "detect", str(meshes / mesh), "-o", str(alone), *TINY_FLAGS, "-q"]
+        subprocess.run(command, env={**os.environ, **ONE_THREAD}, check=True, timeout=300)
+        for file in ("marginals", "unary"):
+            np.testing.assert_array_equal(getattr(saved, file), getattr(Result.load(alone), file))
+        np.testing.assert_array_equal(np.load(out / name / "symmetry_map.npy"), np.load(alone / "symmetry_map.npy"))
+        assert json.loads((out / name / "symmetries.json").read_text()) == json.loads(
+            (alone / "symmetries.json").read_text()
+        )
+        assert (
+            saved.info.content_key
+            == rows.loc[name, "key"]
+            == items.content_key(items.Item(name, str(meshes / mesh), PARAMS))
+        )
+    # the generated shapes carry their symmetry maps: scored as `intrinsym evaluate` scores them
+    assert json.loads((out / "star" / "scores.json").read_text())["mirror_hit"] == rows.loc["star", "mirror_hit"]
+    assert np.isnan(rows.loc["spot", "mirror_hit"])
+    on_disk = pd.read_csv(out / "summary.csv")
+    assert list(on_disk["name"]) == list(frame["name"])
+
+
+def test_a_rerun_skips_what_is_done_and_new_parameters_recompute(
+    by_path, meshes: Path, cluster, tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    shutil.copytree(by_path[0], out)
+    before = _mtimes(out / "star")
+    again = intrinsym.batch([str(meshes / "star.off"), str(meshes / "cubo.off")], out, PARAMS, scheduler="tcp://0:1")
+    assert list(again["status"]) == ["skipped", "skipped"]  # no cluster needed: nothing to run
+    assert _mtimes(out / "star") == before
+    assert again["seconds"].tolist() == by_path[1].set_index("name").loc[["star", "cubo"], "seconds"].tolist()
+    seed = Params(**{**TINY, "seed": 1})
+    changed = intrinsym.batch([str(meshes / "star.off")], out, seed, scheduler=cluster.scheduler_address)
+    assert list(changed["status"]) == ["done"] and _mtimes(out / "star") != before
+
+
+def test_bytes_transport_gives_the_same_result(by_path, meshes: Path, cluster, tmp_path: Path) -> None:
+    out, _ = by_path
+    frame = intrinsym.batch(
+        [str(meshes / "cubo.off"), str(meshes / "broken.off")],
+        tmp_path,
+        PARAMS,
+        scheduler=cluster.scheduler_address,
+        transport="bytes",
+    )
+    assert list(frame["status"]) == ["done", "failed"]
+    sent, read = Result.load(tmp_path / "cubo"), Result.load(out / "cubo")
+    np.testing.assert_array_equal(sent.marginals, read.marginals)
+    assert sent.info.input == str(meshes / "cubo.off")  # the original path, not the worker's copy
+    assert frame["mirror_hit"].iloc[0] == pytest.approx(read_scores(out / "cubo")["mirror_hit"])
+
+
+def read_scores(folder: Path) -> dict:
+    return json.loads((folder / "scores.json").read_text())
+
+
+def test_a_killed_worker_s_item_runs_again_and_is_reported_once(meshes: Path, cluster, tmp_path: Path) -> None:
+    killed: list[str] = []
+
+    def kill_one_busy_worker() -> None:
+        with distributed.Client(cluster.scheduler_address, timeout="20s") as client:
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline and not killed:
+                busy = [w for w, keys in client.processing().items() if keys]
+                if busy:
+                    time.sleep(0.5)  # well inside the item
+                    pids = client.run(os.getpid, workers=busy[:1])
+                    os.kill(pids[busy[0]], signal.SIGKILL)
+                    killed.append(busy[0])
+                time.sleep(0.1)
+
+    killer = threading.Thread(target=kill_one_busy_worker)
+    killer.start()
+    inputs = [str(meshes / name) for name in ("cubo.off", "star.off")]
+    frame = intrinsym.batch(inputs, tmp_path, PARAMS, scheduler=cluster.scheduler_address)
+    killer.join()
+    assert killed, "no worker was killed"
+    assert sorted(frame["name"]) == ["cubo", "star"]  # each item exactly once
+    assert (frame["status"] == "done").all(), frame[["name", "error"]]
+    assert killed[0] not in set(frame["worker"])  # every item was finished by a live worker
+    cluster.wait_for_workers(2, timeout=120)
+
+
+def _wait_for(condition, seconds: float = 180) -> None:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.1)
+
+
+def test_an_interrupted_batch_resumes_on_a_separately_started_scheduler(meshes: Path, tmp_path: Path) -> None:
+    """``dask scheduler`` + ``dask worker`` on loopback, ``--scheduler``; SIGINT after the
+    first item; the re-run leaves the finished folders untouched and runs the rest."""
+    env = {**os.environ, **ONE_THREAD}
+    bin_dir = Path(sys.executable).parent
+    file = tmp_path / "scheduler.json"
+    scheduler = subprocess.Popen(
+        [
+            bin_dir / "dask",
+            "scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--no-dashboard",
+            "--scheduler-file",
+            file,
+        ],
+        env=env,
+        stderr=subprocess.DEVNULL,
+    )
+    worker = None
+    try:
+        _wait_for(file.is_file, 60)
+        worker = subprocess.Popen(
+            [bin_dir / "dask", "worker", "--scheduler-file", file, "--nthreads", "1", "--no-dashboard"],
+            env=env,
+            stderr=subprocess.DEVNULL,
+        )
+        address = json.loads(file.read_text())["address"]
+        out = tmp_path / "out"
+        names = ["cubo", "star", "spot"]
+        inputs = [str(meshes / m) for m in ("cubo.off", "star.off", "spot.obj")]
+        command = [sys.executable, "-m", "intrinsym", "batch", *inputs, "-o", str(out), "--scheduler", address]
+        client = subprocess.Popen([*command, *TINY_FLAGS, "--quiet"], env=env)
+        _wait_for(lambda: any(items.stored_key(out / n) for n in names))
+        client.send_signal(signal.SIGINT)
+        assert client.wait(60) == 130
+        interrupted = pd.read_parquet(out / "summary.parquet")
+        assert "interrupted" in set(interrupted["status"])
+        finished = [n for n in names if items.stored_key(out / n)]
+        assert len(finished) < len(names)
+        before = {n: _mtimes(out / n) for n in finished}
+        rerun = subprocess.run([*command, *TINY_FLAGS, "--json"], env=env, capture_output=True, text=True, timeout=300)
+        assert rerun.returncode == 0, rerun.stderr
+        report = json.loads(rerun.stdout)
+        # an item running when the client stopped may finish on the worker meanwhile: done or skipped, once
+        assert report["skipped"] >= len(finished) and report["done"] >= 1
+        assert report["skipped"] + report["done"] == len(names)
+        assert {n: _mtimes(out / n) for n in finished} == before
+        frame = pd.read_parquet(out / "summary.parquet")
+        assert sorted(frame["name"]) == sorted(names) and set(frame["status"]) == {"done", "skipped"}
+    finally:
+        for process in (worker, scheduler):
+            if process is not None:
+                process.terminate()
+                process.wait(30)
+
+
+def test_pairs_mode_matches_the_horse_frames(cluster, tmp_path: Path) -> None:
+    frames = [str(shared(f"sumner_horse/horse-0{i}.obj")) for i in (1, 2)]
+    frame = intrinsym.batch(frames, tmp_path, PARAMS, pairs=True, scheduler=cluster.scheduler_address)
+    assert list(frame["name"]) == ["horse-01--horse-02", "horse-02--horse-01"]
+    assert (frame["status"] == "done").all(), frame["error"]
+    assert (frame["mode"] == "match").all()
+    run = Result.load(tmp_path / "horse-02--horse-01").info
+    assert (run.mode, run.input, run.target_input) == ("match", frames[1], frames[0])
+
+
+def test_report_prints_the_aggregate_and_writes_the_plot(by_path, capsys: pytest.CaptureFixture) -> None:
+    out, _ = by_path
+    assert main(["batch", "--report", "-o", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert set(report["report"]) == {"broken", "cubo", "spot", "star", "all"}
+    assert report["report"]["all"]["failed"] == 1 and report["report"]["all"]["items"] == 4
+    assert Path(report["plot"]).stat().st_size > 1000
+
+
+def test_a_manifest_sets_parameters_per_row_and_groups_pairs(meshes: Path, tmp_path: Path) -> None:
+    manifest = tmp_path / "set.csv"
+    manifest.write_text(
+        f"mesh,symmetry_map,class,n_source,zoomout\n"
+        f"{meshes / 'star.off'},{meshes / 'star.sym.npy'},a,30,false\n"
+        f"{meshes / 'cubo.off'},,a,,\n"
+        f"{meshes / 'spot.obj'},,b,,\n"
+    )
+    listed = items.collect([str(manifest)], PARAMS)
+    assert [(i.name, i.group, i.params.n_source, i.params.zoomout) for i in listed] == [
+        ("star", "a", 30, False),
+        ("cubo", "a", 20, True),
+        ("spot", "b", 20, True),
+    ]
+    assert listed[0].symmetry_map == str(meshes / "star.sym.npy") and listed[1].symmetry_map is None
+    pairs = items.collect([str(manifest)], PARAMS, pairs=True, group_by="class")
+    assert [i.name for i in pairs] == ["star--cubo", "cubo--star"]
+    keys = {items.content_key(i) for i in (*listed, items.Item("x", listed[1].mesh, PARAMS))}
+    assert len(keys) == 3  # the same mesh and parameters give the same key, whatever the folder
+    (tmp_path / "typo.csv").write_text("mesh,n_sourec\nx.off,3\n")
+    with pytest.raises(intrinsym.ParameterError, match="n_sourec"):
+        items.collect([str(tmp_path / "typo.csv")], PARAMS)
+
+
+def test_the_local_cluster_fits_the_cores_and_the_memory() -> None:
+    few = [items.Item(str(i), "m.off", PARAMS) for i in range(3)]
+    assert engine.plan_cluster(few, n_cores=16, memory=64 << 30) == engine.ClusterPlan(
+        3, 5, (64 << 30) // 3, engine.item_bytes(few[0])
+    )
+    big = [items.Item(str(i), "m.off", Params(n_source=2000, n_target=60000)) for i in range(32)]
+    plan = engine.plan_cluster(big, n_cores=16, memory=64 << 30)
+    assert plan.workers * plan.item_bytes <= 64 << 30 < (plan.workers + 1) * plan.item_bytes
+    assert plan.workers * plan.threads <= 16
