@@ -36,3 +36,17 @@ def test_bench_missing_mesh_is_an_input_error(tmp_path, capsys):
     assert main(["bench", str(missing), "--json"]) == 2
     err = capsys.readouterr().err
     assert str(missing) in err and "Traceback" not in err
+
+
+def test_bench_profile_json(capsys):
+    """--profile: seconds per stage, per BP iteration (as many as BP ran) and per descriptor step."""
+    assert main(["bench", "--small", "--profile", "--json", "--iterations", "2"]) == 0
+    prof = json.loads(capsys.readouterr().out)
+    assert {"load", "prepare", "geodesics", "descriptors", "bp", "extract"} <= set(prof["stages"])
+    assert 1 <= len(prof["bp_iterations"]) <= 4  # one BP run, or two when the identity decision reruns it
+    assert all(s > 0 for s in prof["bp_iterations"])
+    steps = {"laplacian", "eigenpairs", "wks", "spin cloud", "spin images", "nmi", "near targets"}
+    assert set(prof["descriptor_steps"]) == steps and all(s >= 0 for s in prof["descriptor_steps"].values())
+    assert prof["working_vertices"] >= 1200  # spot, 2,930 vertices, is not subdivided at 40 / 400
+    lines = bench.profile_lines(bench.Profile(**prof))
+    assert lines[0].startswith(prof["mesh"]) and any(line.lstrip().startswith("bp:") for line in lines)

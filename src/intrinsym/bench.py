@@ -18,10 +18,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.spatial.distance import cdist
 
-from . import bp, example_path, model, pipeline
-from .params import Params
-from .progress import BPIteration, ProgressEvent
+from . import bp, descriptors, example_path, model, pipeline, sampling, unary
+from .params import OFFSET_TARGETS, Params
+from .progress import BPIteration, ProgressEvent, StageDone
+from .surface import as_shape, prepare, sample
 
 
 @dataclass(frozen=True)
@@ -277,3 +279,104 @@ def table(results: Sequence[CaseResult]) -> list[list[str]]:
             ]
         )
     return rows
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Where the time of one ``detect`` goes (seconds).
+
+    Attributes
+    ----------
+    mesh : str
+    working_vertices : int
+        Vertices of the working surface (after subdivision).
+    stages : dict of str -> float
+        Seconds per pipeline stage, as in ``run.json``.
+    bp_iterations : tuple of float
+        Seconds of every BP iteration (all passes, in order).
+    descriptor_steps : dict of str -> float
+        The descriptor stage's steps timed again one by one on the same surface and
+        samples: the Laplacian, the eigenpairs (Laplacian included), the WKS distances,
+        the spin images' surface cloud, the spin images, their NMI, and the geodesics
+        to the calibration targets.
+    """
+
+    mesh: str
+    working_vertices: int
+    stages: dict
+    bp_iterations: tuple
+    descriptor_steps: dict
+
+
+def descriptor_steps(mesh: str, p: Params) -> tuple[int, dict[str, float]]:
+    """Time the steps of the descriptor stage of a self-matching ``detect`` one by one.
+
+    Returns
+    -------
+    working_vertices : int
+    seconds : dict of str -> float
+    """
+    seconds: dict[str, float] = {}
+
+    def timed(name: str, fn: Callable, *args, **kwargs):
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - t0
+        return out
+
+    surf = prepare(as_shape(mesh), pipeline._min_vertices(p))
+    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
+    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
+    v, f = surf.shape.vertices, surf.shape.faces
+    timed("laplacian", descriptors.laplace_beltrami, v, f)
+    evals, evecs = timed("eigenpairs", descriptors.eigenpairs, v, f, min(p.eigenpairs, len(v) - 1))
+
+    def wks() -> np.ndarray:
+        energies, sigma = descriptors.wks_energies(evals, p.energies)
+        a = descriptors.wave_kernel_signature(evals, evecs[ps], energies, sigma)
+        return cdist(a, descriptors.wave_kernel_signature(evals, evecs[pt], energies, sigma))
+
+    timed("wks", wks)
+    cloud = v if f is None else timed("spin cloud", sampling.area_uniform_points, v, f, p.spin_cloud, seed=p.seed)[0]
+    images = [
+        timed("spin images", descriptors.spin_images, v[x], surf.normals[x], cloud, p.spin_radius, p.spin_bins)
+        for x in (ps, pt)
+    ]
+    quantized = [descriptors.quantize(im, p.spin_levels) for im in images]
+    timed("nmi", descriptors.nmi, quantized[0], quantized[1], p.spin_levels)
+    spacing = p.target_spacing or sampling.spacing_for_count(1.0, len(pt))
+    timed("near targets", unary.near_targets, surf, ps, pt, max((OFFSET_TARGETS + 2) * spacing, p.trivial_radius))
+    return len(v), seconds
+
+
+def profile(mesh: str, p: Params, log: Callable[[str], None] | None = None) -> Profile:
+    """Run ``detect`` on ``mesh`` with ``p`` (in this process), then time the descriptor
+    steps again one by one (:func:`descriptor_steps`); Numba kernels are compiled (or
+    loaded from the cache) by the first run, so the steps' times are warm."""
+    iteration_seconds: list[float] = []
+    last = [time.perf_counter()]
+
+    def progress(event: ProgressEvent) -> None:
+        now = time.perf_counter()
+        if isinstance(event, BPIteration):
+            iteration_seconds.append(now - last[0])
+        last[0] = now
+        if log is not None:
+            log(_describe(event) if not isinstance(event, StageDone) else f"{event.stage}: {event.seconds:.2f} s")
+
+    res = pipeline.detect(mesh, p, progress=progress)
+    working, steps = descriptor_steps(mesh, p)
+    return Profile(mesh, working, dict(res.info.seconds), tuple(iteration_seconds), steps)
+
+
+def profile_lines(prof: Profile) -> list[str]:
+    """The printed profile: stages, descriptor steps, BP iterations."""
+    total = sum(prof.stages.values())
+    lines = [f"{prof.mesh}: {prof.working_vertices} working vertices, {total:.2f} s in all"]
+    lines += [f"  {name:<14}{sec:8.2f} s  {100 * sec / total:5.1f} %" for name, sec in prof.stages.items()]
+    lines.append("  descriptor steps (timed again one by one):")
+    lines += [f"    {name:<12}{sec:8.2f} s" for name, sec in prof.descriptor_steps.items()]
+    its = np.asarray(prof.bp_iterations)
+    if its.size:
+        lines.append(f"  bp: {its.size} iterations, {its.mean():.3f} s each (min {its.min():.3f}, max {its.max():.3f})")
+    return lines
