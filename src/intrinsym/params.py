@@ -9,6 +9,7 @@ from them. Lengths are in units of sqrt(surface area), so every default is scale
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from dataclasses import dataclass
@@ -25,16 +26,27 @@ Calibration = Literal["local", "both", "offset", "descriptor"]
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
-#: Smallest fraction of the global symmetry's sample pairs that the seeded ZoomOut map
-#: must keep (:func:`intrinsym.vertex_maps.agreement`), else the extraction's map stays: a
-#: guard against ZoomOut drifting to another symmetry.
-ZOOMOUT_AGREEMENT = 0.5
 #: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity.
 NO_PARTNER_WEIGHT = 0.7
+#: The global map is seeded ZoomOut's (vertex-precise) unless it keeps this much less
+#: marginal mass (within ``mass_radius``) than the extraction's map (resolved to the
+#: sample spacing); a spectral candidate replaces the model's map only when it keeps this
+#: much more (:func:`intrinsym.globalmap.choose_global_map`; measured in docs/results.md).
+MAP_MARGIN = 0.1
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
 SPIN_SCALES = (0.5, 1.0, 2.0)
+
+#: Largest accepted ``eigenpairs`` and ``zoomout_final``: the eigensolver's time grows
+#: steeply with it, and the WKS and ZoomOut use far fewer.
+MAX_EIGENPAIRS = 1000
+#: Largest accepted ``energies`` (the signatures are (points, energies) arrays).
+MAX_ENERGIES = 10000
+#: Largest accepted ``spin_bins`` (each spin image holds spin_bins^2 bytes per point).
+MAX_SPIN_BINS = 128
+#: Largest accepted ``spin_cloud`` (24 bytes per point, twice).
+MAX_SPIN_CLOUD = 10_000_000
 
 #: Command-line sections, in the order the help lists them.
 GROUPS = ("sampling", "unary", "pairwise", "bp", "trivial match", "extraction", "global map")
@@ -161,7 +173,12 @@ class Params:
         paper="serial",
     )
     iterations: int = _p(100, "maximum BP iterations T", "bp", paper="100")
-    bp_tol: float = _p(1e-4, "stop BP when the largest change of a max-normalised message is below this", "bp")
+    bp_tol: float = _p(
+        3e-3,
+        "stop BP when the largest change of a max-normalised message is below this (the marginals' and map's "
+        "scores on TOSCA are those of 1e-4, in a third fewer iterations)",
+        "bp",
+    )
     damping: float = _p(0.0, "message damping, in [0, 1)", "bp")
     backend: Backend = _p(
         "auto",
@@ -239,17 +256,41 @@ class Params:
         self_match=True,
     )
     zoomout_final: int = _p(50, "eigenfunctions of ZoomOut's last level", "global map", self_match=True)
+    mass_radius: float = _p(
+        0.1,
+        "radius around a sample's image within which its marginal mass counts for a map: "
+        "the candidate global maps are judged by it, and symmetry_mass.npy holds it",
+        "global map",
+        unit=AREA,
+        self_match=True,
+    )
+    fallback_mass: float = _p(
+        0.6,
+        "below this kept marginal mass of the chosen global map, the spectral baseline's "
+        "candidates (sign search + ZoomOut) are scored by the marginals too, and the best "
+        "replaces it when it keeps clearly more",
+        "global map",
+        self_match=True,
+    )
 
     def __post_init__(self) -> None:
         for name, value in _choices().items():
             if getattr(self, name) not in value:
                 raise ParameterError(f"{name} must be one of {value}, got {getattr(self, name)!r}")
+        for f in describe():
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ParameterError(f"{f.name} must be a finite number, got {value}")
         checks = [
             (self.n_source is None and self.source_spacing is None, "give n_source or source_spacing"),
             (self.n_target is None and self.target_spacing is None, "give n_target or target_spacing"),
             (self.n_source is not None and self.n_source < 2, "n_source must be at least 2"),
             (self.n_target is not None and self.n_target < 2, "n_target must be at least 2"),
-            (self.spin_bins < 2, "spin_bins must be at least 2"),
+            (self.source_spacing is not None and self.source_spacing <= 0, "source_spacing must be positive"),
+            (self.target_spacing is not None and self.target_spacing <= 0, "target_spacing must be positive"),
+            (self.seed < 0, "seed must be at least 0"),
+            (not 2 <= self.spin_bins <= MAX_SPIN_BINS, f"spin_bins must lie in [2, {MAX_SPIN_BINS}]"),
+            (not 1 <= self.spin_cloud <= MAX_SPIN_CLOUD, f"spin_cloud must lie in [1, {MAX_SPIN_CLOUD}]"),
             (self.spin_radius <= 0, "spin_radius must be positive"),
             (not 2 <= self.spin_levels <= 255, "spin_levels must lie in [2, 255]"),
             (self.gamma <= 0, "gamma must be positive"),
@@ -265,6 +306,8 @@ class Params:
                 "trivial_weight must be 'auto' or lie in [0, 1)",
             ),
             (not 0 <= self.isometry_threshold <= 1, "isometry_threshold must lie in [0, 1]"),
+            (not 0 <= self.fallback_mass <= 1, "fallback_mass must lie in [0, 1]"),
+            (not self.mass_radius > 0, "mass_radius must be positive"),
             (self.passes is not None and self.passes < 1, "passes must be at least 1"),
             (self.pass_radius <= 0, "pass_radius must be positive"),
             (
@@ -276,9 +319,14 @@ class Params:
                 self.potential == "paper" and self.unary not in ("spin", "spin-multi"),
                 "potential 'paper' (Eq. 5) applies to a single spin-image term only",
             ),
-            (self.eigenpairs < 2, "eigenpairs must be at least 2"),
-            (self.energies < 2, "energies must be at least 2"),
+            (not 2 <= self.eigenpairs <= MAX_EIGENPAIRS, f"eigenpairs must lie in [2, {MAX_EIGENPAIRS}]"),
+            (not 2 <= self.energies <= MAX_ENERGIES, f"energies must lie in [2, {MAX_ENERGIES}]"),
             (self.calibration_k < 1, "calibration_k must be at least 1"),
+            (
+                self.n_target is not None and self.calibration_k > self.n_target,
+                f"calibration_k must be at most n_target ({self.n_target})",
+            ),
+            (self.zoomout_final > MAX_EIGENPAIRS, f"zoomout_final must be at most {MAX_EIGENPAIRS}"),
             (not 0 < self.unary_floor < 1, "unary_floor must lie in (0, 1)"),
             (not 1 <= self.zoomout_seed <= self.zoomout_final, "need 1 <= zoomout_seed <= zoomout_final"),
         ]
