@@ -54,7 +54,7 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import descriptors, evaluate, extract, geodesics, shapes, spectral
+from intrinsym import descriptors, evaluate, extract, geodesics, pipeline, shapes, spectral
 from intrinsym.shape import from_arrays, surface_area
 from intrinsym.vertex_maps import fitted_vertex_map
 
@@ -127,10 +127,7 @@ def cached(cache: Path | None, name: str, run) -> tuple[intrinsym.Result, float]
     start = time.perf_counter()
     if folder is not None and (folder / "result.npz").exists():
         result = intrinsym.Result.load(folder)
-        result.extraction = extract.extract_from_support(result.marginals, result.edges, result.support,
-                                                         result.source_points, result.target_points,
-                                                         result.extraction_params(), unary=result.unary,
-                                                         passes=result.passes)
+        result.extraction = pipeline.extract_result(result)
     else:
         result = run()
         if folder is not None:
@@ -163,8 +160,17 @@ def corner_recovery(result: intrinsym.Result, shape: shapes.GeneratedShape) -> t
     for i in range(len(corners)):
         s = int(np.argmin(dist[i, result.source_point_vertex]))
         peaks = extract.peaks(result.marginals[s], result.support.targets, params.threshold, params.peak_radius)
-        parts = extract.query_from_support(result.marginals, result.edges, result.support, result.source_points,
-                                           result.target_points, s, params, unary=result.unary, passes=passes)
+        parts = extract.query_from_support(
+            result.marginals,
+            result.edges,
+            result.support,
+            result.source_points,
+            result.target_points,
+            s,
+            params,
+            unary=result.unary,
+            passes=passes,
+        )
         images = [int(p.target[np.searchsorted(p.source, s)]) for p in parts if p.kind != "identity"]
         others = np.delete(dist, i, axis=0)
         for found, targets in ((found_peaks, peaks), (found_parts, images)):
@@ -189,8 +195,9 @@ def arm_matrix(result: intrinsym.Result, source_labels: np.ndarray, target_label
     return share
 
 
-def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
-                target: shapes.GeneratedShape) -> list[np.ndarray]:
+def vertex_maps(
+    result: intrinsym.Result, source: shapes.GeneratedShape, target: shapes.GeneratedShape
+) -> list[np.ndarray]:
     """Every extracted symmetry extended to the input vertices.
 
     One that covers at least ``global_fraction`` of the source samples by seeded ZoomOut
@@ -200,23 +207,46 @@ def vertex_maps(result: intrinsym.Result, source: shapes.GeneratedShape,
     """
     params = result.extraction_params()
     evecs = descriptors.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
-    other = {} if source is target else dict(
-        target_vertices=target.vertices,
-        target_evecs=descriptors.eigenpairs(target.vertices, target.faces, EIGENPAIRS)[1])
+    other = (
+        {}
+        if source is target
+        else dict(
+            target_vertices=target.vertices,
+            target_evecs=descriptors.eigenpairs(target.vertices, target.faces, EIGENPAIRS)[1],
+        )
+    )
     maps = []
     for sym in result.extraction.symmetries:
         if len(sym.source) >= params.global_fraction * len(result.marginals):
-            maps.append(spectral.seeded_symmetry(source.vertices, evecs, result.source_point_vertex[sym.source],
-                                                 result.target_point_vertex[sym.target], result.params.zoomout_seed,
-                                                 result.params.zoomout_final, **other))
+            maps.append(
+                spectral.seeded_symmetry(
+                    source.vertices,
+                    evecs,
+                    result.source_point_vertex[sym.source],
+                    result.target_point_vertex[sym.target],
+                    result.params.zoomout_seed,
+                    result.params.zoomout_final,
+                    **other,
+                )
+            )
         else:
-            maps.append(fitted_vertex_map(sym, result.support, result.edges, result.source_points,
-                                          result.target_points, result.target_point_vertex, params))
+            maps.append(
+                fitted_vertex_map(
+                    sym,
+                    result.support,
+                    result.edges,
+                    result.source_points,
+                    result.target_points,
+                    result.target_point_vertex,
+                    params,
+                )
+            )
     return maps
 
 
-def check_arms(report: Report, name: str, result: intrinsym.Result, labels_a: np.ndarray, labels_b: np.ndarray,
-               include_self: bool) -> None:
+def check_arms(
+    report: Report, name: str, result: intrinsym.Result, labels_a: np.ndarray, labels_b: np.ndarray, include_self: bool
+) -> None:
     share = arm_matrix(result, labels_a, labels_b)
     pairs = ~np.eye(len(share), dtype=bool) if not include_self else np.ones_like(share, dtype=bool)
     found = share[pairs] >= ARM_SHARE
@@ -226,34 +256,50 @@ def check_arms(report: Report, name: str, result: intrinsym.Result, labels_a: np
     report.add(name, "weakest pair: best share carried", f"{share[pairs].min():.2f}", None)
 
 
-def check_segmentation(report: Report, name: str, result: intrinsym.Result, source: shapes.GeneratedShape,
-                       target: shapes.GeneratedShape) -> None:
+def check_segmentation(
+    report: Report, name: str, result: intrinsym.Result, source: shapes.GeneratedShape, target: shapes.GeneratedShape
+) -> None:
     """The paper's segmentation scores (:func:`intrinsym.evaluate.segmentation_scores`)
     of the extracted symmetry that best realises a ground-truth map, the best pair by
     mean score over the parts, scored against that map; and how many of the ground-truth
     maps some symmetry realises with every part at least ``SEGMENTATION``. Every
     ground-truth map of ``source.symmetries`` is a candidate: a shape with a symmetry
     group has no one principal map (the cuboctahedron's 47 are alike)."""
-    scores = np.array([[list(evaluate.segmentation_scores(vmap, truth, source.labels).values())
-                        for truth in source.symmetries] for vmap in vertex_maps(result, source, target)])
+    scores = np.array(
+        [
+            [list(evaluate.segmentation_scores(vmap, truth, source.labels).values()) for truth in source.symmetries]
+            for vmap in vertex_maps(result, source, target)
+        ]
+    )
     if not scores.size:
         report.add(name, "segmentation per part", "nothing extracted", False)
         return
     index, truth = np.unravel_index(np.argmax(scores.mean(axis=2)), scores.shape[:2])
     values = scores[index, truth]
-    report.add(name, f"segmentation per part (symmetry #{index}, truth #{truth})",
-               " ".join(f"{v:.2f}" for v in values), bool(values.min() >= SEGMENTATION))
+    report.add(
+        name,
+        f"segmentation per part (symmetry #{index}, truth #{truth})",
+        " ".join(f"{v:.2f}" for v in values),
+        bool(values.min() >= SEGMENTATION),
+    )
     realised = (scores.min(axis=2) >= SEGMENTATION).any(axis=0)
-    report.add(name, f"ground-truth maps realised, every part >= {SEGMENTATION}",
-               f"{realised.sum()}/{len(realised)}", None)
+    report.add(
+        name, f"ground-truth maps realised, every part >= {SEGMENTATION}", f"{realised.sum()}/{len(realised)}", None
+    )
 
 
 def summary(report: Report, name: str, result: intrinsym.Result, seconds: float) -> None:
     ex = result.extraction
     bp = result.info.bp
     kinds = f"{len(ex.symmetries)} symmetries, global #{ex.global_index}"
-    report.add(name, f"|Ps| {len(result.marginals)} |Pt| {result.marginals.shape[1]}, BP it {bp.iterations}"
-               f"{'' if bp.converged else ' (not converged)'}", kinds, None, seconds)
+    report.add(
+        name,
+        f"|Ps| {len(result.marginals)} |Pt| {result.marginals.shape[1]}, BP it {bp.iterations}"
+        f"{'' if bp.converged else ' (not converged)'}",
+        kinds,
+        None,
+        seconds,
+    )
 
 
 def run_cuboctahedron(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
@@ -263,10 +309,18 @@ def run_cuboctahedron(report: Report, sizes: tuple[int, int], cache: Path | None
     summary(report, shape.name, result, seconds)
     peaks, parts = corner_recovery(result, shape)
     for what, found in (("marginal peaks", peaks), ("query parts", parts)):
-        report.add(shape.name, f"vertices found from each vertex: {what}",
-                   f"mean {found.mean():.2f}, min {found.min():.2f}", None)
-    report.add(shape.name, f"all 11 other vertices within {RADIUS} (12 vertices)",
-               f"{int(np.sum(parts == 1.0))}/12", bool(np.all(parts == 1.0)))
+        report.add(
+            shape.name,
+            f"vertices found from each vertex: {what}",
+            f"mean {found.mean():.2f}, min {found.min():.2f}",
+            None,
+        )
+    report.add(
+        shape.name,
+        f"all 11 other vertices within {RADIUS} (12 vertices)",
+        f"{int(np.sum(parts == 1.0))}/12",
+        bool(np.all(parts == 1.0)),
+    )
     check_segmentation(report, shape.name, result, shape, shape)
 
 
@@ -282,8 +336,9 @@ def run_star(report: Report, sizes: tuple[int, int], cache: Path | None, overrid
 def run_lantern(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
     a, b = shapes.lantern()
     params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
-    result, seconds = cached(cache, "lantern",
-                             lambda: intrinsym.match((a.vertices, a.faces), (b.vertices, b.faces), params))
+    result, seconds = cached(
+        cache, "lantern", lambda: intrinsym.match((a.vertices, a.faces), (b.vertices, b.faces), params)
+    )
     summary(report, "lantern", result, seconds)
     check_arms(report, "lantern", result, a.labels, b.labels, include_self=True)
     check_segmentation(report, "lantern", result, a, b)
@@ -305,29 +360,57 @@ def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, over
     for seed in PARTIAL_SEEDS:
         name = f"partial s{seed}"
         params = intrinsym.make_params(n_source=n_source, n_target=n_target, seed=seed, **overrides)
-        result, seconds = cached(cache, f"partial-{seed}",
-                                 functools.partial(intrinsym.detect, (shape.vertices, shape.faces), params))
+        result, seconds = cached(
+            cache, f"partial-{seed}", functools.partial(intrinsym.detect, (shape.vertices, shape.faces), params)
+        )
         summary(report, name, result, seconds)
         identity = result.info.identity
-        weight, isometry, threshold = ((identity.weight, identity.isometry, identity.threshold)
-                                       if identity is not None else (None, None, None))
-        report.add(name, "trivial weight (auto: argmax edges kept)",
-                   f"{result.params.trivial_weight} -> {weight} ({np.nan if isometry is None else isometry:.2f}"
-                   f" < {threshold})", None)
-        scores = {what: evaluate.partial_scores(shape.vertices, shape.faces, shape.labels, shape.symmetries[0], m,
-                                                result.source_point_vertex, result.target_point_vertex)
-                  for what, m in (("unary", result.unary), ("BP", result.marginals))}
-        report.add(name, f"limb mirror hit unary / BP (BP >= {LIMB_HIT})",
-                   f"{scores['unary'].limb_hit:.2f} / {scores['BP'].limb_hit:.2f}", scores["BP"].limb_hit >= LIMB_HIT)
+        weight, isometry, threshold = (
+            (identity.weight, identity.isometry, identity.threshold) if identity is not None else (None, None, None)
+        )
+        report.add(
+            name,
+            "trivial weight (auto: argmax edges kept)",
+            f"{result.params.trivial_weight} -> {weight} ({np.nan if isometry is None else isometry:.2f}"
+            f" < {threshold})",
+            None,
+        )
+        scores = {
+            what: evaluate.partial_scores(
+                shape.vertices,
+                shape.faces,
+                shape.labels,
+                shape.symmetries[0],
+                m,
+                result.source_point_vertex,
+                result.target_point_vertex,
+            )
+            for what, m in (("unary", result.unary), ("BP", result.marginals))
+        }
+        report.add(
+            name,
+            f"limb mirror hit unary / BP (BP >= {LIMB_HIT})",
+            f"{scores['unary'].limb_hit:.2f} / {scores['BP'].limb_hit:.2f}",
+            scores["BP"].limb_hit >= LIMB_HIT,
+        )
         off = {what: float(np.median(sc.off_mass)) for what, sc in scores.items()}
-        report.add(name, f"off-limb peak mass median unary / BP (BP < {OFF_MASS})",
-                   f"{off['unary']:.2f} / {off['BP']:.2f}", off["BP"] < OFF_MASS)
-        report.add(name, "no global symmetry extracted", f"global #{result.extraction.global_index}",
-                   result.extraction.global_index < 0)
+        report.add(
+            name,
+            f"off-limb peak mass median unary / BP (BP < {OFF_MASS})",
+            f"{off['unary']:.2f} / {off['BP']:.2f}",
+            off["BP"] < OFF_MASS,
+        )
+        report.add(
+            name,
+            "no global symmetry extracted",
+            f"global #{result.extraction.global_index}",
+            result.extraction.global_index < 0,
+        )
 
 
-def horse_sides(result: intrinsym.Result, reference: np.ndarray,
-                scale: float) -> list[tuple[float, float, float, float]]:
+def horse_sides(
+    result: intrinsym.Result, reference: np.ndarray, scale: float
+) -> list[tuple[float, float, float, float]]:
     """For every extracted symmetry: share of its off-plane pairs that keep their side,
     share that swap sides, share that lie nearer their own side than the mirrored one,
     and its share of the source samples.
@@ -346,16 +429,24 @@ def horse_sides(result: intrinsym.Result, reference: np.ndarray,
         keep = off_plane[a]
         same = np.linalg.norm(reference[b] - reference[a], axis=1) < 0.05 * scale
         swap = np.linalg.norm(reference[b] - mirrored[a], axis=1) < 0.05 * scale
-        nearer = (np.linalg.norm(reference[b] - reference[a], axis=1)
-                  < np.linalg.norm(reference[b] - mirrored[a], axis=1))
+        nearer = np.linalg.norm(reference[b] - reference[a], axis=1) < np.linalg.norm(
+            reference[b] - mirrored[a], axis=1
+        )
         n = max(int(keep.sum()), 1)
-        out.append((float(np.sum(same & keep) / n), float(np.sum(swap & keep) / n), float(np.sum(nearer & keep) / n),
-                    len(sym.source) / len(result.marginals)))
+        out.append(
+            (
+                float(np.sum(same & keep) / n),
+                float(np.sum(swap & keep) / n),
+                float(np.sum(nearer & keep) / n),
+                len(sym.source) / len(result.marginals),
+            )
+        )
     return out
 
 
-def run_horse(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict,
-              data: str | None = None) -> None:
+def run_horse(
+    report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict, data: str | None = None
+) -> None:
     """Horse-01 matched to horse-03 (``sumner_horse/`` of the data folder ``data``, else
     of ``$INTRINSYM_DATA``): do the identity and the left/right swap both appear?"""
     folder = data_folder(data)
@@ -364,38 +455,57 @@ def run_horse(report: Report, sizes: tuple[int, int], cache: Path | None, overri
         report.add("horse", no_data("horse case", data if horse is None else horse), "", None)
         return
     params = intrinsym.make_params(n_source=sizes[0], n_target=sizes[1], **overrides)
-    result, seconds = cached(cache, "horse",
-                             lambda: intrinsym.match(horse / "horse-01.obj", horse / "horse-03.obj", params))
+    result, seconds = cached(
+        cache, "horse", lambda: intrinsym.match(horse / "horse-01.obj", horse / "horse-03.obj", params)
+    )
     summary(report, "horse 01->03", result, seconds)
     ref = intrinsym.load(horse / "horse_ref.obj")
     scale = float(np.sqrt(surface_area(ref)))
     sides = horse_sides(result, np.asarray(ref.vertices), scale)
     for i, (same, swap, nearer, size) in enumerate(sides[:6]):
-        report.add("horse 01->03", f"symmetry #{i} ({size:.2f} of Ps): same / swapped side",
-                   f"{same:.2f} / {swap:.2f} (nearer own side {nearer:.2f})", None)
+        report.add(
+            "horse 01->03",
+            f"symmetry #{i} ({size:.2f} of Ps): same / swapped side",
+            f"{same:.2f} / {swap:.2f} (nearer own side {nearer:.2f})",
+            None,
+        )
     found = {
-        "identity": [i for i, (same, swap, nearer, size) in enumerate(sides)
-                     if size >= HORSE_SIZE and nearer >= HORSE_SIDE and swap <= HORSE_MIXED],
-        "left/right swap": [i for i, (same, swap, nearer, size) in enumerate(sides)
-                            if size >= HORSE_SIZE and 1 - nearer >= HORSE_SIDE and same <= HORSE_MIXED],
+        "identity": [
+            i
+            for i, (same, swap, nearer, size) in enumerate(sides)
+            if size >= HORSE_SIZE and nearer >= HORSE_SIDE and swap <= HORSE_MIXED
+        ],
+        "left/right swap": [
+            i
+            for i, (same, swap, nearer, size) in enumerate(sides)
+            if size >= HORSE_SIZE and 1 - nearer >= HORSE_SIDE and same <= HORSE_MIXED
+        ],
     }
     for what, index in (("identity", 0), ("left/right swap", 1)):
         hits = found[what]
         listed = ", ".join(f"#{i}" for i in hits[:3]) + (f" and {len(hits) - 3} more" if len(hits) > 3 else "")
-        report.add("horse 01->03", f"{what} appears (HORSE_SIZE, HORSE_SIDE, HORSE_MIXED)", listed or "none",
-                   bool(hits))
+        report.add(
+            "horse 01->03", f"{what} appears (HORSE_SIZE, HORSE_SIDE, HORSE_MIXED)", listed or "none", bool(hits)
+        )
         best = max((sides[i][index] for i in hits), default=0.0)
         report.add("horse 01->03", f"{what}: best share of its pairs within 0.05", f"{best:.2f}", None)
 
 
-CASES = {"cuboctahedron": run_cuboctahedron, "star": run_star, "lantern": run_lantern, "figure": run_figure,
-         "partial": run_partial, "horse": run_horse}
+CASES = {
+    "cuboctahedron": run_cuboctahedron,
+    "star": run_star,
+    "lantern": run_lantern,
+    "figure": run_figure,
+    "partial": run_partial,
+    "horse": run_horse,
+}
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true",
-                        help=f"smaller samples {SIZES['quick']} instead of {SIZES['full']}")
+    parser.add_argument(
+        "--quick", action="store_true", help=f"smaller samples {SIZES['quick']} instead of {SIZES['full']}"
+    )
     parser.add_argument("--cache", type=Path, help="save results here; later runs load and re-extract them")
     parser.add_argument("--passes", type=int, help="BP passes (default: the library's)")
     parser.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="cases to run")

@@ -48,8 +48,14 @@ def run_backend(mrf: model.MRF, schedule: str, backend: str) -> bp.BPResult:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("meshes", nargs="+", type=Path)
-    parser.add_argument("--sizes", nargs=2, type=int, default=(271, 12722), metavar=("PS", "PT"),
-                        help="|Ps| |Pt| (default: the paper's elephant, 271 12722)")
+    parser.add_argument(
+        "--sizes",
+        nargs=2,
+        type=int,
+        default=(271, 12722),
+        metavar=("PS", "PT"),
+        help="|Ps| |Pt| (default: the paper's elephant, 271 12722)",
+    )
     parser.add_argument("--json", action="store_true", help="one JSON object per mesh instead of a table")
     args = parser.parse_args(argv)
     if not bp.gpu_available():
@@ -65,8 +71,11 @@ def main(argv: list[str] | None = None) -> int:
         print("|---|---|---|---|---|---|---|---|")
     for path in args.meshes:
         mrf, sizes = mrf_of(path, *args.sizes)
-        runs = {(schedule, backend): run_backend(mrf, schedule, backend)
-                for schedule in ("colour", "flooding") for backend in ("cpu", "gpu")}
+        runs = {
+            (schedule, backend): run_backend(mrf, schedule, backend)
+            for schedule in ("colour", "flooding")
+            for backend in ("cpu", "gpu")
+        }
         agreement = {}
         for schedule in ("colour", "flooding"):
             cpu, gpu = runs[schedule, "cpu"], runs[schedule, "gpu"]
@@ -74,21 +83,34 @@ def main(argv: list[str] | None = None) -> int:
             argmax = float(np.mean(gpu.marginals.argmax(axis=1) == cpu.marginals.argmax(axis=1)))
             agreement[schedule] = {"relative_difference": relative, "argmax_agreement": argmax}
             failed |= relative > MAX_RELATIVE or gpu.iterations != cpu.iterations
-        row = {f"{backend} {schedule}": {"seconds_per_iteration": float(np.median(r.seconds)),
-                                         "iterations": r.iterations, "seconds": float(np.sum(r.seconds)),
-                                         "converged": r.converged}
-               for (schedule, backend), r in runs.items()}
+        row = {
+            f"{backend} {schedule}": {
+                "seconds_per_iteration": float(np.median(r.seconds)),
+                "iterations": r.iterations,
+                "seconds": float(np.sum(r.seconds)),
+                "converged": r.converged,
+            }
+            for (schedule, backend), r in runs.items()
+        }
         if args.json:
-            print(json.dumps({"mesh": str(path), "sizes": sizes, "device": device, "backends": row,
-                              "gpu_against_cpu": agreement}))
+            print(
+                json.dumps(
+                    {"mesh": str(path), "sizes": sizes, "device": device, "backends": row, "gpu_against_cpu": agreement}
+                )
+            )
             continue
         for schedule, backend in runs:
             r, a = row[f"{backend} {schedule}"], agreement[schedule]
-            agree = (f"max rel. diff {a['relative_difference']:.1e}, argmax {a['argmax_agreement']:.3f}"
-                     if backend == "gpu" else "")
-            print(f"| {path.name} | {sizes['source']} / {sizes['target']} | {sizes['directed_edges']} "
-                  f"| {backend} {schedule} "
-                  f"| {r['seconds_per_iteration']:.4f} | {r['iterations']} | {r['seconds']:.2f} | {agree} |")
+            agree = (
+                f"max rel. diff {a['relative_difference']:.1e}, argmax {a['argmax_agreement']:.3f}"
+                if backend == "gpu"
+                else ""
+            )
+            print(
+                f"| {path.name} | {sizes['source']} / {sizes['target']} | {sizes['directed_edges']} "
+                f"| {backend} {schedule} "
+                f"| {r['seconds_per_iteration']:.4f} | {r['iterations']} | {r['seconds']:.2f} | {agree} |"
+            )
     return 1 if failed else 0
 
 

@@ -66,8 +66,10 @@ def main(argv: list[str] | None = None) -> int:
         print(no_data("horse_frames.py", args.data if horse is None else horse))
         return 0
     sym = evaluate.extrinsic_mirror(intrinsym.load(horse / "horse_ref.obj").vertices)[0]
-    print("| shape | geodesic change of the true map: median / p90 | spectral baseline: within 0.05 / 0.10 / mean "
-          "| ours, defaults | ours, trivial_weight 0 |")
+    print(
+        "| shape | geodesic change of the true map: median / p90 | spectral baseline: within 0.05 / 0.10 / mean "
+        "| ours, defaults | ours, trivial_weight 0 |"
+    )
     print("|---|---|---|---|---|")
     for name in args.frames:
         shape = intrinsym.load(horse / f"{name}.obj")

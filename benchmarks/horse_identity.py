@@ -55,8 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     if horse is None or not horse.is_dir():
         print(no_data("horse_identity.py", args.data if horse is None else horse))
         return 0
-    res = intrinsym.match(horse / "horse-01.obj", horse / "horse-03.obj", n_source=args.sizes[0],
-                          n_target=args.sizes[1])
+    res = intrinsym.match(
+        horse / "horse-01.obj", horse / "horse-03.obj", n_source=args.sizes[0], n_target=args.sizes[1]
+    )
     ref = intrinsym.load(horse / "horse_ref.obj")
     vertices = np.asarray(ref.vertices)
     scale = np.sqrt(surface_area(ref))
@@ -74,13 +75,17 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  pass 1 (from uniform messages): {score(res.marginals)}")
     print(f"  pass 2 (from uniform messages): {score(res.pass_marginals[0])}")
     mrf = res.mrf()
-    runs = (("pass 1", res.unary, "identity", a), ("pass 2", res.passes[0][1], "identity", a),
-            ("pass 1", res.unary, "swap", swap[a]))
+    runs = (
+        ("pass 1", res.unary, "identity", a),
+        ("pass 2", res.passes[0][1], "identity", a),
+        ("pass 1", res.unary, "swap", swap[a]),
+    )
     for name, unary, truth, vertex in runs:
         start = point_mass_messages(mrf, res.support.vertex_target[vertex])
         for k in CHECKPOINTS:
-            run = bp.belief_propagation(dataclasses.replace(mrf, unary=unary), "colour", k, res.params.bp_tol,
-                                        backend="cpu", initial=start)
+            run = bp.belief_propagation(
+                dataclasses.replace(mrf, unary=unary), "colour", k, res.params.bp_tol, backend="cpu", initial=start
+            )
             print(f"  {name} unary, from the true {truth}, {run.iterations} iterations: {score(run.marginals)}")
             if run.converged:
                 break

@@ -52,8 +52,7 @@ def config_params(config: str) -> tuple[str, dict]:
     return "default", {"unary": config}
 
 
-def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int = 0,
-                **params) -> dict:
+def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int = 0, **params) -> dict:
     """Run ``detect`` on one shape and score its unary, its BP marginals and its global map.
 
     ``sym_path`` None: the ground truth is the shape's best reflection
@@ -76,8 +75,9 @@ def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int =
     else:
         sym = evaluate.load_symmetry_map(sym_path, len(shape.vertices))
     for column, marginals in (("unary", result.unary), ("bp", result.marginals)):
-        scores = evaluate.score_marginals(marginals, result.source_point_vertex, result.target_point_vertex, shape,
-                                          sym, seed=seed)
+        scores = evaluate.score_marginals(
+            marginals, result.source_point_vertex, result.target_point_vertex, shape, sym, seed=seed
+        )
         row[column] = scores.as_dict()
     found = evaluate.score_map(result.symmetry_map(), shape, sym)
     row["map"] = {"within_0.05": found.within(0.05), "within_0.10": found.within(0.10), "mean_error": found.mean_error}
@@ -88,8 +88,11 @@ def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int =
 
 def markdown(rows: list[dict]) -> str:
     """The rows as a Markdown table: shape x configuration x {unary, bp} scores."""
-    head = (["shape", "config"] + [f"{c} {s}" for s in SCORES for c in ("unary", "bp")]
-            + ["BP iterations", "map within 0.05", "map within 0.10", "map mean error"])
+    head = (
+        ["shape", "config"]
+        + [f"{c} {s}" for s in SCORES for c in ("unary", "bp")]
+        + ["BP iterations", "map within 0.05", "map within 0.10", "map mean error"]
+    )
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         shape = r["shape"]
@@ -110,11 +113,16 @@ def _sym_path(data: Path, shape: str) -> Path:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python benchmarks/scores.py``; returns the exit code."""
     parser = argparse.ArgumentParser(prog="benchmarks/scores.py", description=__doc__.split("\n\n")[0])
-    add_data_argument(parser, "research data folder (its tosca_sym/) or a folder of <class><pose>.off meshes with "
-                              "<class>.sym maps")
+    add_data_argument(
+        parser, "research data folder (its tosca_sym/) or a folder of <class><pose>.off meshes with <class>.sym maps"
+    )
     parser.add_argument("--shapes", help=f"comma-separated shapes (default {','.join(SHAPES)}, none with --mirror)")
-    parser.add_argument("--mirror", action="append", default=[],
-                        help="a mesh without a symmetry file, scored against its best reflection; repeat")
+    parser.add_argument(
+        "--mirror",
+        action="append",
+        default=[],
+        help="a mesh without a symmetry file, scored against its best reflection; repeat",
+    )
     parser.add_argument("--config", action="append", help="preset or unary name; repeat (default: paper and default)")
     parser.add_argument("--source", type=int, help="|Ps| (default: the configuration's)")
     parser.add_argument("--target", type=int, help="|Pt| (default: the configuration's)")
@@ -122,8 +130,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed of sampling, BP order and decoys (default 0)")
     parser.add_argument("-o", "--out", help="write the table here (.md) and the rows beside it (.json)")
     args = parser.parse_args(argv)
-    params = {k: v for k, v in (("n_source", args.source), ("n_target", args.target),
-                                ("iterations", args.iterations)) if v is not None}
+    params = {
+        k: v
+        for k, v in (("n_source", args.source), ("n_target", args.target), ("iterations", args.iterations))
+        if v is not None
+    }
     rows = []
     wanted = args.shapes if args.shapes is not None else "" if args.mirror else ",".join(SHAPES)
     shapes = [shape for shape in wanted.split(",") if shape]

@@ -41,8 +41,20 @@ SHAPES = {
     **{
         name: (f"tosca_sym/{name}.off", f"tosca_sym/{name.rstrip('0123456789')}.sym")
         for name in (
-            "cat1", "dog1", "horse5", "michael1", "victoria1", "centaur1", "wolf1", "michael2",
-            "cat0", "dog0", "horse0", "victoria0", "centaur0", "wolf0",
+            "cat1",
+            "dog1",
+            "horse5",
+            "michael1",
+            "victoria1",
+            "centaur1",
+            "wolf1",
+            "michael2",
+            "cat0",
+            "dog0",
+            "horse0",
+            "victoria0",
+            "centaur0",
+            "wolf0",
         )
     },
     "kids": ("kids_sym/0001.isometry.1.off", "kids_sym/sym.txt"),
@@ -89,8 +101,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.json:
             print(json.dumps(row))
         else:
-            print(f"| {name} | {row['within_0.05']:.3f} | {row['within_0.10']:.3f} "
-                  f"| {row['mean_error']:.4f} | {row['seconds']:.1f} |")
+            print(
+                f"| {name} | {row['within_0.05']:.3f} | {row['within_0.10']:.3f} "
+                f"| {row['mean_error']:.4f} | {row['seconds']:.1f} |"
+            )
         sys.stdout.flush()
     return 0
 

@@ -34,8 +34,9 @@ TABLE1 = (
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_data_argument(parser)
-    parser.add_argument("--cases", help="comma-separated case names (default: all): "
-                                        + ", ".join(c.name for c in TABLE1))
+    parser.add_argument(
+        "--cases", help="comma-separated case names (default: all): " + ", ".join(c.name for c in TABLE1)
+    )
     parser.add_argument("--iterations", type=int, default=100, help="maximum BP iterations (paper: 100)")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     args = parser.parse_args(argv)

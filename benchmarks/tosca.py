@@ -127,8 +127,9 @@ def select(all_cases: list[Case], names: list[str] | None) -> list[Case]:
     known = {c.name for c in all_cases} | {c.cls for c in all_cases}
     unknown = [n for n in names if n not in known]
     if unknown:
-        raise SystemExit(f"tosca.py: unknown shape(s) {', '.join(unknown)}; known: "
-                         f"{', '.join(c.name for c in all_cases)}")
+        raise SystemExit(
+            f"tosca.py: unknown shape(s) {', '.join(unknown)}; known: {', '.join(c.name for c in all_cases)}"
+        )
     return [c for c in all_cases if c.name in names or c.cls in names]
 
 
@@ -219,8 +220,12 @@ def _clean_floats(obj):
 
 
 def _map_row(scores) -> dict:
-    return {"within_0.05": scores.within(0.05), "within_0.10": scores.within(0.10),
-            "mean_error": scores.mean_error, "coverage": scores.coverage}
+    return {
+        "within_0.05": scores.within(0.05),
+        "within_0.10": scores.within(0.10),
+        "mean_error": scores.mean_error,
+        "coverage": scores.coverage,
+    }
 
 
 def _machine() -> str:
@@ -241,8 +246,11 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     shape = intrinsym.load(case.mesh)
     n = len(shape.vertices)
     row: dict = {
-        "shape": case.name, "class": case.cls, "mesh": f"{case.mesh.parent.name}/{case.mesh.name}",
-        "vertices": n, "seed": seed,
+        "shape": case.name,
+        "class": case.cls,
+        "mesh": f"{case.mesh.parent.name}/{case.mesh.name}",
+        "vertices": n,
+        "seed": seed,
     }
     if case.truth is None:
         sym, residual = evaluate.extrinsic_mirror(shape.vertices)
@@ -278,8 +286,10 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     # back to input vertices: each cleaned vertex is represented by its first input vertex
     first = np.empty(len(cleaned.vertices), dtype=np.int64)
     first[vertex_map[::-1]] = np.arange(len(vertex_map))[::-1]
-    row["spectral"] = {**_map_row(evaluate.score_map(first[image[vertex_map]], shape, sym)),
-                       "seconds": spectral_seconds}
+    row["spectral"] = {
+        **_map_row(evaluate.score_map(first[image[vertex_map]], shape, sym)),
+        "seconds": spectral_seconds,
+    }
     row["version"] = intrinsym.__version__
     row["tag"] = tag
     row["cache_format"] = CACHE_FORMAT
@@ -299,8 +309,10 @@ def _cached(cache: Path | None, case: Case, tag: str | None) -> dict | None:
     except (OSError, ValueError):
         return None
     if (row.get("tag"), row.get("version"), row.get("cache_format")) != (tag, intrinsym.__version__, CACHE_FORMAT):
-        print(f"{case.name}: cache entry from tag {row.get('tag')!r} / version {row.get('version')!r}: recomputing",
-              file=sys.stderr)
+        print(
+            f"{case.name}: cache entry from tag {row.get('tag')!r} / version {row.get('version')!r}: recomputing",
+            file=sys.stderr,
+        )
         return None
     return row
 
@@ -322,6 +334,7 @@ def _work(case: Case, tag: str | None, cache: Path | None, seed: int) -> dict:
 
 # --------------------------------------------------------------------------- table
 
+
 def _get(row: dict, *keys):
     value = row
     for key in keys:
@@ -336,8 +349,10 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
     cols = []
     for score in MARGINAL:
         label = score.replace("_", " ")
-        cols += [(f"{label} unary", ("unary", score), score != "decoy_recall", ".3f"),
-                 (f"{label} BP", ("bp", score), score != "decoy_recall", ".3f")]
+        cols += [
+            (f"{label} unary", ("unary", score), score != "decoy_recall", ".3f"),
+            (f"{label} BP", ("bp", score), score != "decoy_recall", ".3f"),
+        ]
     cols += [
         ("map ≤0.05", ("map", "within_0.05"), True, ".3f"),
         ("map ≤0.10", ("map", "within_0.10"), True, ".3f"),
@@ -370,7 +385,8 @@ def _fmt(value, fmt: str) -> str:
         return "yes" if value else "no"
     if fmt == "d":
         return str(round(value))
-    return format(value, fmt)
+    text = format(value, fmt)
+    return format(0.0, fmt) if text.strip("+-0.") == "" else text  # no "-0.000"
 
 
 def _summary(rows: list[dict], cols) -> tuple[list[str], list[str]]:
@@ -382,8 +398,9 @@ def _summary(rows: list[dict], cols) -> tuple[list[str], list[str]]:
             # a shape without a global map has no mean error: it is the worst
             missing = sum(v is None for v in values)
             finite = [v for v in values if v is not None]
-            means.append(_fmt(float(np.mean(finite)), fmt) + (f" ({missing} none)" if missing else "")
-                         if finite else "–")
+            means.append(
+                _fmt(float(np.mean(finite)), fmt) + (f" ({missing} none)" if missing else "") if finite else "–"
+            )
             worsts.append("none" if missing else _fmt(max(finite), fmt) if finite else "–")
             continue
         finite = [float(v) for v in values if v is not None]
@@ -433,24 +450,31 @@ def markdown(rows: list[dict], show_stages: bool = False) -> str:
             lines.append(f"| {cls} worst | " + " | ".join(worsts) + " |")
         out.append("Per class:\n\n" + "\n".join(lines))
 
-    stats = sorted((r["decision"]["statistic"], r["shape"]) for r in ok
-                   if _get(r, "decision", "statistic") is not None)
+    stats = sorted((r["decision"]["statistic"], r["shape"]) for r in ok if _get(r, "decision", "statistic") is not None)
     if stats:
         threshold = next((_get(r, "decision", "threshold") for r in ok if _get(r, "decision", "threshold")), None)
         kept = [r["shape"] for r in ok if _get(r, "decision", "identity_kept")]
         out.append(
             "Decision statistic (share of source edges BP's argmax keeps"
-            + (f"; identity kept below {threshold}" if threshold is not None else "") + "), sorted: "
+            + (f"; identity kept below {threshold}" if threshold is not None else "")
+            + "), sorted: "
             + ", ".join(f"{name} {value:.3f}" for value, name in stats)
-            + f". Identity kept (judged partial): {', '.join(kept) if kept else 'none'}.")
+            + f". Identity kept (judged partial): {', '.join(kept) if kept else 'none'}."
+        )
     behind = [(r["shape"], r["delta_0.10"]) for r in ok if r["delta_0.10"] is not None and r["delta_0.10"] < -0.01]
-    out.append("Shapes more than 0.01 below the spectral baseline within 0.10: "
-               + (", ".join(f"{name} ({d:+.3f})" for name, d in behind) if behind else "none") + ".")
+    out.append(
+        "Shapes more than 0.01 below the spectral baseline within 0.10: "
+        + (", ".join(f"{name} ({d:+.3f})" for name, d in behind) if behind else "none")
+        + "."
+    )
     total = sum(r.get("seconds_total", 0.0) for r in ok)
     total_spectral = sum(_get(r, "spectral", "seconds") or 0.0 for r in ok)
     meta = sorted({(r.get("tag"), r.get("version"), r.get("machine")) for r in ok}, key=str)
-    out.append(f"Total: detect {total:.0f} s, spectral baseline {total_spectral:.0f} s over {len(ok)} shapes; "
-               + "; ".join(f"tag {t}, intrinsym {v}, {m}" for t, v, m in meta) + ".")
+    out.append(
+        f"Total: detect {total:.0f} s, spectral baseline {total_spectral:.0f} s over {len(ok)} shapes; "
+        + "; ".join(f"tag {t}, intrinsym {v}, {m}" for t, v, m in meta)
+        + "."
+    )
     failed = [r for r in rows if "error" in r]
     if failed:
         out.append("Failed: " + "; ".join(f"{r['shape']}: {r['error']}" for r in failed) + ".")
@@ -497,9 +521,12 @@ def main(argv: list[str] | None = None) -> int:
         if "error" in row:
             print(f"{case.name}: FAILED {row['error']}", file=sys.stderr)
         else:
-            print(f"{case.name}: map ≤0.10 {row['map']['within_0.10']:.3f} (spectral "
-                  f"{row['spectral']['within_0.10']:.3f}), detect {row['seconds_total']:.1f} s "
-                  f"[{len(rows)}/{len(todo)}, {time.perf_counter() - start:.0f} s]", file=sys.stderr)
+            print(
+                f"{case.name}: map ≤0.10 {row['map']['within_0.10']:.3f} (spectral "
+                f"{row['spectral']['within_0.10']:.3f}), detect {row['seconds_total']:.1f} s "
+                f"[{len(rows)}/{len(todo)}, {time.perf_counter() - start:.0f} s]",
+                file=sys.stderr,
+            )
         sys.stderr.flush()
 
     if args.jobs <= 1:

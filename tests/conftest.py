@@ -23,9 +23,7 @@ def shared(relative: str) -> Path:
 
 
 # A square pyramid: quad base (0, 1, 2, 3) and apex 4.
-PYRAMID_V = np.array(
-    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1.0]], dtype=np.float64
-)
+PYRAMID_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1.0]], dtype=np.float64)
 PYRAMID_F = np.array(  # the quad fan-triangulated from its first corner, then the sides
     [[0, 3, 2], [0, 2, 1], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]], dtype=np.int64
 )
@@ -84,12 +82,15 @@ def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
     _, nearest = cKDTree(v[sources]).query(v[sources], k=4)
     edges = np.unique(np.sort(np.column_stack([np.repeat(nearest[:, 0], 3), nearest[:, 1:].ravel()]), axis=1), axis=0)
     info = RunInfo(
-        mode="detect", input=str(path),
+        mode="detect",
+        input=str(path),
         sizes=Sizes(len(sources), len(v), len(edges), 2 * len(edges), 3, 0, len(v), len(v)),
-        resolved=Resolved(1.0, 1.0, 0.1, 0.05, 0.5, 1e-3, 1.0), seconds={"bp": 0.0},
+        resolved=Resolved(1.0, 1.0, 0.1, 0.05, 0.5, 1e-3, 1.0),
+        seconds={"bp": 0.0},
         bp=BPStats("cpu", 1, True, 0.0, (0.0,), 0.0, 0.0, 0),
     )
     out = folder / "out"
-    Result(v[sources], v.copy(), sources, np.arange(len(v)), edges.astype(np.int64), marginals, marginals,
-           Params(), info).save(out)
+    Result(
+        v[sources], v.copy(), sources, np.arange(len(v)), edges.astype(np.int64), marginals, marginals, Params(), info
+    ).save(out)
     return out, v

@@ -14,16 +14,21 @@ import scores  # noqa: E402
 
 
 def test_score_table_markdown():
-    row = {"shape": "cat1", "config": "wks", "iterations": 4,
-           "unary": dict(mirror_hit=0.5, peak_recall=0.25, decoy_recall=0.0, breadth=0.125, n_scored=3),
-           "bp": dict(mirror_hit=1.0, peak_recall=1.0, decoy_recall=0.0, breadth=0.0625, n_scored=3),
-           "map": {"within_0.05": 0.5, "within_0.10": 0.75, "mean_error": 0.03125}}
+    row = {
+        "shape": "cat1",
+        "config": "wks",
+        "iterations": 4,
+        "unary": dict(mirror_hit=0.5, peak_recall=0.25, decoy_recall=0.0, breadth=0.125, n_scored=3),
+        "bp": dict(mirror_hit=1.0, peak_recall=1.0, decoy_recall=0.0, breadth=0.0625, n_scored=3),
+        "map": {"within_0.05": 0.5, "within_0.10": 0.75, "mean_error": 0.03125},
+    }
     mirrored = dict(row, shape="cow", mirror_residual=0.0001)
     lines = scores.markdown([row, mirrored]).splitlines()
     assert lines[0].startswith("| shape | config | unary mirror_hit | bp mirror_hit |")
     assert lines[0].endswith("| BP iterations | map within 0.05 | map within 0.10 | map mean error |")
-    assert lines[2] == ("| cat1 | `wks` | 0.500 | 1.000 | 0.250 | 1.000 | 0.000 | 0.000 | 0.125 | 0.062 | 4 "
-                        "| 0.500 | 0.750 | 0.031 |")
+    assert lines[2] == (
+        "| cat1 | `wks` | 0.500 | 1.000 | 0.250 | 1.000 | 0.000 | 0.000 | 0.125 | 0.062 | 4 | 0.500 | 0.750 | 0.031 |"
+    )
     assert lines[3].startswith("| cow (reflection, residual 0.0001) | `wks` |")
     assert scores.config_params("paper") == ("paper", {})
     assert scores.config_params("wks*spin") == ("default", {"unary": "wks*spin"})
@@ -39,8 +44,27 @@ def test_score_table_bad_data_is_one_line_exit_2(tmp_path, capsys):
 def test_wks_spin_scores_on_tosca_wolf(tmp_path):
     data = shared("tosca_sym/wolf1.off").parent
     out = tmp_path / "table.md"
-    assert scores.main(["--data", str(data), "--shapes", "wolf1", "--config", "wks*spin", "--source", "100",
-                        "--target", "1000", "--iterations", "5", "-o", str(out)]) == 0
+    assert (
+        scores.main(
+            [
+                "--data",
+                str(data),
+                "--shapes",
+                "wolf1",
+                "--config",
+                "wks*spin",
+                "--source",
+                "100",
+                "--target",
+                "1000",
+                "--iterations",
+                "5",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     row = json.loads(out.with_suffix(".json").read_text())[0]
     assert row["unary"]["mirror_hit"] >= 0.9 and row["bp"]["mirror_hit"] >= 0.9
     assert row["bp"]["decoy_recall"] <= 0.05
@@ -55,8 +79,25 @@ def test_score_table_against_a_reflection(tmp_path):
     path = tmp_path / "bent.off"
     trimesh.Trimesh(v, f, process=False).export(path)
     out = tmp_path / "table.md"
-    assert scores.main(["--mirror", str(path), "--config", "default", "--source", "60", "--target", "600",
-                        "--iterations", "10", "-o", str(out)]) == 0
+    assert (
+        scores.main(
+            [
+                "--mirror",
+                str(path),
+                "--config",
+                "default",
+                "--source",
+                "60",
+                "--target",
+                "600",
+                "--iterations",
+                "10",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     row = json.loads(out.with_suffix(".json").read_text())[0]
     assert row["shape"] == "bent" and row["mirror_residual"] < 1e-6
     assert row["bp"]["mirror_hit"] >= 0.9 and row["map"]["within_0.10"] >= 0.9

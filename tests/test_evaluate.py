@@ -64,8 +64,13 @@ def test_symmetry_map_formats(tmp_path):
 
 @pytest.mark.parametrize(
     "text,n,match",
-    [("", None, "empty"), ("1\nx\n", None, "cannot read"), ("1.5\n2\n", None, "non-integer"),
-     ("1\n5\n", None, "out of range"), ("1\n2\n", 3, "2 entries")],
+    [
+        ("", None, "empty"),
+        ("1\nx\n", None, "cannot read"),
+        ("1.5\n2\n", None, "non-integer"),
+        ("1\n5\n", None, "out of range"),
+        ("1\n2\n", 3, "2 entries"),
+    ],
 )
 def test_symmetry_map_errors(tmp_path, text, n, match):
     path = tmp_path / "bad.sym"

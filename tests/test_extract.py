@@ -12,6 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from intrinsym.confidence import kept_mass, map_mass, mass_within, sample_images
 from intrinsym.extract import (
     Extraction,
     ExtractParams,
@@ -29,7 +30,7 @@ from intrinsym.extract import (
 )
 from intrinsym.geodesics import SparseDistances
 from intrinsym.support import SourceGraph, Support
-from intrinsym.vertex_maps import agreement, fitted_vertex_map, vertex_map
+from intrinsym.vertex_maps import fitted_vertex_map, vertex_map
 
 T, S = 40, 10
 IDENTITY = 4 * np.arange(S)
@@ -260,14 +261,14 @@ def test_later_passes_add_their_modes_scored_on_their_own_marginals():
     assert scores[tuple(ROTATION.tolist())] == pytest.approx(scores[tuple(MIRROR.tolist())])
     # a third map only in the second pass's unary, seeded with unary_seeds
     turn = (IDENTITY + 16) % T
-    seeded = extract(first, GRAPH, TARGETS, p, self_target=SELF, unary=first,
-                     passes=[(second, marginals(mirror=turn))])
+    seeded = extract(first, GRAPH, TARGETS, p, self_target=SELF, unary=first, passes=[(second, marginals(mirror=turn))])
     assert tuple(turn.tolist()) in {tuple(s.target.tolist()) for s in seeded.symmetries}
     images = {tuple(s.target.tolist()) for s in query(first, GRAPH, TARGETS, 2, p, SELF, passes=[(second, second)])}
     assert {tuple(MIRROR.tolist()), tuple(ROTATION.tolist())} <= images
     # at most max_count symmetries per pass
-    capped = extract(first, GRAPH, TARGETS, dataclasses.replace(p, max_count=1), self_target=SELF,
-                     passes=[(second, second)])
+    capped = extract(
+        first, GRAPH, TARGETS, dataclasses.replace(p, max_count=1), self_target=SELF, passes=[(second, second)]
+    )
     assert len(capped.symmetries) == 2
 
 
@@ -280,8 +281,9 @@ def test_merge_joins_agreeing_maps_only():
     assert len(groups) == 2
     assert any(g.tolist() == MIRROR.tolist() for g in groups)
     # adjacent but not overlapping parts of one map merge across the edge 5-6
-    groups = _merge([np.where(np.arange(S) <= 5, MIRROR, -1), np.where(np.arange(S) >= 6, MIRROR, -1)],
-                    GRAPH, TARGETS, p)
+    groups = _merge(
+        [np.where(np.arange(S) <= 5, MIRROR, -1), np.where(np.arange(S) >= 6, MIRROR, -1)], GRAPH, TARGETS, p
+    )
     assert [g.tolist() for g in groups] == [MIRROR.tolist()]
 
 
@@ -291,7 +293,12 @@ def test_vertex_map_and_nearest_targets():
     vertex_source = np.array([0, 0, 3, -1, 9])
     target_vertex = 100 + np.arange(T)
     assert vertex_map(mirror, vertex_source, target_vertex, S).tolist() == [
-        100 + MIRROR[0], 100 + MIRROR[0], 100 + MIRROR[3], -1, 100 + MIRROR[9]]
+        100 + MIRROR[0],
+        100 + MIRROR[0],
+        100 + MIRROR[3],
+        -1,
+        100 + MIRROR[9],
+    ]
     angle = 2 * np.pi * np.arange(T) / T
     pts = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(T)]) / (2 * np.pi)
     assert nearest_targets(pts[IDENTITY] * 1.001, pts).tolist() == IDENTITY.tolist()
@@ -319,8 +326,12 @@ def plane_mirror(image_of=None):
     d = np.linalg.norm(points[:, None] - points[None], axis=2)
     edges = np.array([(a, b) for a in range(n) for b in range(a + 1, n) if abs(d[a, b] - 0.25) < 1e-9])
     rows = [np.argsort(d[i], kind="stable") for i in range(n)]
-    targets = SparseDistances(np.arange(n + 1) * n, np.concatenate(rows),
-                              np.concatenate([d[i, r] for i, r in enumerate(rows)]), float(d.max()))
+    targets = SparseDistances(
+        np.arange(n + 1) * n,
+        np.concatenate(rows),
+        np.concatenate([d[i, r] for i, r in enumerate(rows)]),
+        float(d.max()),
+    )
     cells = cKDTree(points).query(vertices + 1e-6)[1]  # ties broken towards the lower-left sample
     support = Support(np.full(len(edges), 0.25), targets, cells, cells, True, vertices, vertices)
     return Symmetry(np.arange(n), image, 1.0, 1.0, "global"), support, edges, points, truth, sample_vertex
@@ -335,8 +346,10 @@ def test_fitted_vertex_map_resolves_the_cells():
     assert np.mean(cells == truth) < 0.5
     assert fitted.tolist() == truth.tolist()
     # vertex_fit 0, or a support without vertex positions, gives the cell map
-    assert fitted_vertex_map(sym, support, edges, points, points, sample_vertex,
-                             ExtractParams(vertex_fit=0.0)).tolist() == cells.tolist()
+    assert (
+        fitted_vertex_map(sym, support, edges, points, points, sample_vertex, ExtractParams(vertex_fit=0.0)).tolist()
+        == cells.tolist()
+    )
     bare = Support(support.edge_length, support.targets, support.vertex_source, support.vertex_target, True)
     assert fitted_vertex_map(sym, bare, edges, points, points, sample_vertex, FIT).tolist() == cells.tolist()
 
@@ -354,8 +367,17 @@ def test_fitted_vertex_map_keeps_the_cells_where_the_fit_fails():
     assert fitted[far].tolist() == truth[far].tolist()
 
 
-@pytest.mark.parametrize("bad", [dict(threshold=0.0), dict(d_error=0.0), dict(global_fraction=2.0),
-                                 dict(min_fraction=1.5), dict(max_count=0), dict(vertex_fit=-1.0)])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(threshold=0.0),
+        dict(d_error=0.0),
+        dict(global_fraction=2.0),
+        dict(min_fraction=1.5),
+        dict(max_count=0),
+        dict(vertex_fit=-1.0),
+    ],
+)
 def test_params_validated(bad):
     with pytest.raises(ValueError):
         ExtractParams(**bad)
@@ -393,19 +415,40 @@ def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
     # the query reads the saved arrays and grows from the sample whose cell holds the vertex
     sample = 3
     vertex = int(result.source_point_vertex[sample])
-    expected = query_from_support(result.marginals, result.edges, result.support, result.source_points,
-                                  result.target_points, sample, result.params.extraction(), unary=result.unary)
+    expected = query_from_support(
+        result.marginals,
+        result.edges,
+        result.support,
+        result.source_points,
+        result.target_points,
+        sample,
+        result.params.extraction(),
+        unary=result.unary,
+    )
     capsys.readouterr()
     assert cli.main(["query", str(out), "--vertex", str(vertex), "--json"]) == 0
     answer = json.loads(capsys.readouterr().out)
     assert answer["source_sample"] == sample
     assert [s["pairs"] for s in answer["symmetries"]] == [
         np.column_stack([result.source_point_vertex[e.source], result.target_point_vertex[e.target]]).tolist()
-        for e in expected]
+        for e in expected
+    ]
     assert cli.main(["query", str(out), "--vertex", str(10**6)]) == 2
 
-    assert cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "fig.sym.npy"),
-                     "--labels", str(tmp_path / "fig.labels.npy"), "--json"]) == 0
+    assert (
+        cli.main(
+            [
+                "evaluate",
+                str(out),
+                "--symmetry-map",
+                str(tmp_path / "fig.sym.npy"),
+                "--labels",
+                str(tmp_path / "fig.labels.npy"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     report = json.loads((out / "scores.json").read_text())
     assert set(report["map"]["segmentation"]) == {"1", "2", "3", "4", "5"}
     assert (out / "curve.png").is_file()
@@ -432,18 +475,22 @@ def test_refine_trilaterates_misplaced_samples():
     assert refine(GRAPH, TARGETS, holes, p, min_neighbours=2).tolist() == holes.tolist()
 
 
-def test_agreement_counts_the_pairs_a_vertex_map_keeps():
-    """Only pairs whose source vertex lands in the cell of a target sample within the
-    sparse radius (here 0.3, the samples are 0.25 apart) of the pair's target count."""
+def test_confidence_is_the_marginal_mass_near_the_map():
+    """Marginals that put 0.8 on each sample's mirror image and 0.2 on the sample itself
+    (0.25 away and more): a map agreeing with the mirror keeps 0.8 within 0.1, the
+    identity 0.2, and every vertex takes its sample's value."""
     sym, support, _, _, truth, sample_vertex = plane_mirror()
-    t = support.targets
-    near = t.dist <= 0.3
-    indptr = np.r_[0, np.cumsum(np.add.reduceat(near, t.indptr[:-1]))]
-    support = Support(support.edge_length, SparseDistances(indptr, t.indices[near], t.dist[near], 0.3),
-                      support.vertex_source, support.vertex_target, True)
-    assert agreement(sym, truth, sample_vertex, support) == 1.0
-    # the identity keeps the mirror only on its fixed line x = 0.5: 5 of the 25 samples
-    assert agreement(sym, np.arange(len(truth)), sample_vertex, support) == pytest.approx(5 / 25)
-    assert agreement(sym, np.full(len(truth), -1), sample_vertex, support) == 0.0
-    assert agreement(Symmetry(np.zeros(0, np.int64), np.zeros(0, np.int64), 0.0, 1.0, "partial"), truth,
-                     sample_vertex, support) == 1.0
+    n = len(sample_vertex)
+    marginals = np.zeros((n, n))
+    marginals[np.arange(n), sym.target] += 0.8
+    marginals[np.arange(n), np.arange(n)] += 0.2
+    image = sample_images(truth, sample_vertex, support.vertex_target)
+    assert image.tolist() == sym.target.tolist()
+    mirror = mass_within(marginals, image, support.targets, 0.1)
+    on_line = sym.target == np.arange(n)  # the 5 samples on the fixed line x = 0.5
+    assert np.allclose(mirror[~on_line], 0.8) and np.allclose(mirror[on_line], 1.0)
+    assert kept_mass(marginals, np.arange(n), support.targets, 0.1) == pytest.approx((20 * 0.2 + 5) / 25)
+    assert mass_within(marginals, np.full(n, -1), support.targets, 0.1).tolist() == [0.0] * n
+    conf = map_mass(marginals, truth, sample_vertex, support, 0.1)
+    assert conf.dtype == np.float32 and np.allclose(conf, mirror[support.vertex_source])
+    assert map_mass(marginals, np.full(len(truth), -1), sample_vertex, support, 0.1).max() == 0.0

@@ -103,8 +103,10 @@ def test_calibrated_potential_values_products_and_floor():
     np.testing.assert_allclose(phi[0, :3], np.exp(-np.array([0.0, 0.5, 2.0])))
     assert phi[0, 3] == 1e-3  # exp(-50) floored
     # Units do not matter when the scale is measured in them.
-    np.testing.assert_allclose(calibrated_potential([d * 1e4], [descriptor_scale(d * 1e4, 3)]),
-                               calibrated_potential([d], [descriptor_scale(d, 3)]))
+    np.testing.assert_allclose(
+        calibrated_potential([d * 1e4], [descriptor_scale(d * 1e4, 3)]),
+        calibrated_potential([d], [descriptor_scale(d, 3)]),
+    )
     # A product of two terms is the product of their potentials (above the floor).
     both = calibrated_potential([d, 2 * d], [1.0, 2.0], floor=1e-9)
     np.testing.assert_allclose(both[0, :3], calibrated_potential([d], [1.0], 1e-9)[0, :3] ** 2)

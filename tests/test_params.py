@@ -47,12 +47,33 @@ def test_enumerations_match_the_backends():
 
 
 def test_cli_flags_reach_params(tmp_path):
-    args = cli.build_parser().parse_args(["detect", "--example", "-o", str(tmp_path), "--source", "7",
-                                          "--lambda", "3", "--keep-trivial", "--trivial-weight", "auto",
-                                          "--zoomout-final", "40", "--no-unary-seeds"])
+    args = cli.build_parser().parse_args(
+        [
+            "detect",
+            "--example",
+            "-o",
+            str(tmp_path),
+            "--source",
+            "7",
+            "--lambda",
+            "3",
+            "--keep-trivial",
+            "--trivial-weight",
+            "auto",
+            "--zoomout-final",
+            "40",
+            "--no-unary-seeds",
+        ]
+    )
     p = make_params("default", **cli._overrides(args))
     assert (p.n_source, p.lam, p.remove_trivial, p.trivial_weight, p.zoomout_final, p.unary_seeds) == (
-        7, 3.0, False, "auto", 40, False)
+        7,
+        3.0,
+        False,
+        "auto",
+        40,
+        False,
+    )
     with pytest.raises(SystemExit):
         cli.build_parser().parse_args(["detect", "--example", "-o", "x", "--schedule", "fast"])
 
@@ -67,7 +88,8 @@ def test_values_are_checked_at_construction():
 def test_detect_keywords_and_params():
     p = make_params("paper", n_source=5)
     assert intrinsym.pipeline.resolve_params(p, "default", n_source=9, n_target=None, seed=3) == dataclasses.replace(
-        p, n_source=9, seed=3)
+        p, n_source=9, seed=3
+    )
     with pytest.raises(intrinsym.ParameterError, match="not both"):
         intrinsym.pipeline.resolve_params(p, "paper")
 

@@ -9,6 +9,7 @@ import trimesh
 
 import intrinsym
 from intrinsym import bp, evaluate, pipeline, vertex_maps
+from intrinsym.params import MAP_MARGIN
 from intrinsym.shape import Shape
 from intrinsym.support import Support
 
@@ -58,9 +59,10 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert again.params == r.params
     with np.load(out / "result.npz") as z:
         # one shape: its input vertices are stored once, as source_mesh_vertices
-        assert sorted(z.files) == sorted(intrinsym.Result.ARRAYS + Support.KEYS
-                                         + ("source_mesh_vertices", "zoomout_map"))
-    assert (out / "symmetry_confidence.npy").is_file()
+        assert sorted(z.files) == sorted(
+            intrinsym.Result.ARRAYS + Support.KEYS + ("source_mesh_vertices", "zoomout_map")
+        )
+    assert (out / "symmetry_mass.npy").is_file()
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
     assert json.loads((out / "run.json").read_text())["format_version"] == 2
 
@@ -77,17 +79,20 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     r = spot_result
     chosen = r.info.global_map
     assert r.extraction.global_index >= 0 and chosen.source in ("extraction", "zoomout")
-    assert chosen.confidence == max(chosen.masses.values()) and {"extraction", "zoomout"} <= set(chosen.masses)
+    m = chosen.masses
+    assert chosen.mass == m[chosen.source] and {"extraction", "zoomout"} <= set(m)
+    # ZoomOut's vertex-precise map unless it keeps clearly less mass than the extraction's
+    assert chosen.source == ("zoomout" if m["zoomout"] >= m["extraction"] - MAP_MARGIN else "extraction"), m
     assert r.zoomout_map.shape == (len(spot.vertices),) and r.zoomout_map.dtype == np.int64
     assert r.zoomout_map.min() >= 0 and np.mean(r.zoomout_map == np.arange(len(spot.vertices))) < 0.05
     out = r.save(tmp_path / "chosen")
     assert np.array_equal(np.load(out / "symmetry_map.npy"), r.zoomout_map)
     assert np.array_equal(intrinsym.Result.load(out).zoomout_map, r.zoomout_map)
-    conf = np.load(out / "symmetry_confidence.npy")
+    conf = np.load(out / "symmetry_mass.npy")
     assert conf.shape == (len(spot.vertices),) and conf.dtype == np.float32 and 0 <= conf.min() <= conf.max() <= 1
     # the global confidence is the samples' mean confidence
     per_sample = conf[r.source_point_vertex]
-    assert abs(per_sample.mean() - chosen.confidence) < 0.1
+    assert abs(per_sample.mean() - chosen.mass) < 0.1
     # without a chosen map, symmetry_map.npy is the extraction's map of the same symmetry
     plain = dataclasses.replace(r, zoomout_map=None).save(tmp_path / "plain")
     g = r.extraction.symmetries[r.extraction.global_index]
@@ -148,8 +153,10 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     # consistent); weighted, it keeps a share in between (measured 0.34 kept, 0.028
     # removed, 0.125 weighted, chance 0.008)
     chance = inside.mean()
-    mass = {name: (r.marginals / r.marginals.sum(axis=1, keepdims=True))[inside].sum() / len(d)
-            for name, r in (("kept", kept), ("removed", removed), ("weighted", weighted))}
+    mass = {
+        name: (r.marginals / r.marginals.sum(axis=1, keepdims=True))[inside].sum() / len(d)
+        for name, r in (("kept", kept), ("removed", removed), ("weighted", weighted))
+    }
     assert mass["kept"] > 3 * chance and mass["removed"] < mass["kept"] / 5, mass
     assert 2 * mass["removed"] < mass["weighted"] < mass["kept"] / 2, mass
 
@@ -214,11 +221,13 @@ def test_match_two_shapes(tmp_path):
     # the unaries derived from the saved arrays are those the run used: the extraction
     # from the loaded result is the run's own
     again = intrinsym.Result.load(r.save(tmp_path / "out"))
-    assert all(np.array_equal(x, y) for pair in zip(again.passes, r.passes, strict=True)
-               for x, y in zip(*pair, strict=True))
+    assert all(
+        np.array_equal(x, y) for pair in zip(again.passes, r.passes, strict=True) for x, y in zip(*pair, strict=True)
+    )
     redone = pipeline.extract_result(again)
     assert [(s.source.tolist(), s.target.tolist()) for s in redone.symmetries] == [
-        (s.source.tolist(), s.target.tolist()) for s in r.extraction.symmetries]
+        (s.source.tolist(), s.target.tolist()) for s in r.extraction.symmetries
+    ]
     one = intrinsym.detect(a, intrinsym.make_params(**SMALL)).save(tmp_path / "one")
     assert intrinsym.Result.load(one).passes == []
     # a rotated, scaled copy: the MAP target of most source points is its own image
@@ -251,8 +260,10 @@ def test_two_passes_find_the_identity_and_the_swap_of_two_horse_frames():
     frames = [shared(f"sumner_horse/horse-0{k}.obj") for k in (1, 3)]
     reference = np.asarray(intrinsym.load(shared("sumner_horse/horse_ref.obj")).vertices)
     sizes = dict(n_source=150, n_target=1500)
-    sides = {passes: horse_sides(intrinsym.match(*frames, intrinsym.make_params(**sizes, passes=passes)), reference)
-             for passes in (None, 1)}
+    sides = {
+        passes: horse_sides(intrinsym.match(*frames, intrinsym.make_params(**sizes, passes=passes)), reference)
+        for passes in (None, 1)
+    }
     for passes, found in sides.items():
         wide = [side for size, side in found if size >= 0.5]
         assert min(wide) <= 0.1, (passes, found)  # the swap

@@ -176,8 +176,9 @@ def test_seeded_map_between_two_shapes_recovers_a_vertex_permutation(mirror):
     _, ew = descriptors.eigenpairs(w, g, 31)
     truth = np.argsort(order)[sym]  # vertex of the copy that is the mirror image of vertex i of v
     source = np.arange(0, len(v), 40)
-    image = spectral.seeded_symmetry(v, ev, source, truth[source], k_seed=6, n_final=30,
-                                     target_vertices=w, target_evecs=ew)
+    image = spectral.seeded_symmetry(
+        v, ev, source, truth[source], k_seed=6, n_final=30, target_vertices=w, target_evecs=ew
+    )
     assert image.shape == (len(v),) and image.max() < len(w)
     assert np.median(np.linalg.norm(w[image] - w[truth], axis=1)) < 0.02 * 2.0 * np.ptp(v, axis=0).max()
     assert np.mean(image == truth) > 0.8

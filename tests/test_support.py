@@ -22,8 +22,9 @@ def line_support(self_match: bool = True) -> Support:
     targets = SparseDistances(np.arange(5) * 4, np.concatenate(rows), dist, 0.3)
     cells = np.array([0, 1, 2, 3, -1])
     vertices = np.column_stack([np.r_[x, 1.0], np.zeros(5), np.zeros(5)])
-    return Support(np.full(3, 0.1), targets, cells, cells, self_match, vertices,
-                   vertices if self_match else 2.0 * vertices)
+    return Support(
+        np.full(3, 0.1), targets, cells, cells, self_match, vertices, vertices if self_match else 2.0 * vertices
+    )
 
 
 def assert_same(a: Support, b: Support) -> None:

@@ -15,20 +15,30 @@ SMALL = dict(n_source=40, n_target=600, spin_cloud=6000, iterations=3)
 def test_paper_preset_keeps_the_papers_unary():
     p = intrinsym.params.make_params("paper")
     assert (p.unary, p.potential, p.gamma, p.rho, p.schedule, p.iterations, p.remove_trivial) == (
-        "spin", "paper", 0.01, 0.4, "serial", 100, False)
+        "spin",
+        "paper",
+        0.01,
+        0.4,
+        "serial",
+        100,
+        False,
+    )
     assert intrinsym.params.Params().unary != "spin"
 
 
-@pytest.mark.parametrize("bad, match", [
-    (dict(unary="wks*foo"), "unary must"),
-    (dict(unary="wks*wks"), "unary must"),
-    (dict(unary="wks", potential="paper"), "potential 'paper'"),
-    (dict(potential="gauss"), "potential must"),
-    (dict(unary_floor=0.0), "unary_floor"),
-    (dict(calibration_k=0), "calibration_k"),
-    (dict(calibration="median"), "calibration must"),
-    (dict(eigenpairs=1), "eigenpairs"),
-])
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (dict(unary="wks*foo"), "unary must"),
+        (dict(unary="wks*wks"), "unary must"),
+        (dict(unary="wks", potential="paper"), "potential 'paper'"),
+        (dict(potential="gauss"), "potential must"),
+        (dict(unary_floor=0.0), "unary_floor"),
+        (dict(calibration_k=0), "calibration_k"),
+        (dict(calibration="median"), "calibration must"),
+        (dict(eigenpairs=1), "eigenpairs"),
+    ],
+)
 def test_bad_unary_parameters(bad, match):
     with pytest.raises(intrinsym.ParameterError, match=match):
         intrinsym.params.make_params(**bad)
@@ -44,9 +54,12 @@ def mirror_results():
     # removed: at this size "auto" keeps it for WKS alone (its argmax keeps 0.83 of the
     # edges, mixing the mirror and the front-back symmetry), which would add the
     # identity's band to the unary under test
-    out = {name: intrinsym.detect(Shape(v, f), intrinsym.make_params(unary=name, calibration="both",
-                                                                     trivial_weight=0.0, **SMALL))
-           for name in ("wks", "wks*spin")}
+    out = {
+        name: intrinsym.detect(
+            Shape(v, f), intrinsym.make_params(unary=name, calibration="both", trivial_weight=0.0, **SMALL)
+        )
+        for name in ("wks", "wks*spin")
+    }
     out["paper"] = intrinsym.detect(Shape(v, f), intrinsym.make_params("paper", **SMALL))
     return Shape(v, f), sym, out
 
@@ -56,8 +69,10 @@ def test_calibrated_unaries_peak_at_the_mirror_and_nowhere_else(mirror_results):
     # intrinsic descriptor can tell apart: the argmax may pick that image, but the true
     # mirror must carry a peak and random decoys must not, unlike the paper's flat unary.
     shape, sym, results = mirror_results
-    score = {k: evaluate.score_marginals(r.unary, r.source_point_vertex, r.target_point_vertex, shape, sym)
-             for k, r in results.items()}
+    score = {
+        k: evaluate.score_marginals(r.unary, r.source_point_vertex, r.target_point_vertex, shape, sym)
+        for k, r in results.items()
+    }
     for name in ("wks", "wks*spin"):
         r, s = results[name], score[name]
         assert r.info.resolved.unary_floor == intrinsym.params.Params().unary_floor
@@ -85,10 +100,15 @@ NEAR = 0.10  # sqrt(area) units, as in evaluate
 def partial_scores(g, r):
     """Limb hit, the peak masses on and off the limbs (:func:`evaluate.partial_scores`),
     and the largest share of off-limb samples in an extracted symmetry."""
-    p = evaluate.partial_scores(g.vertices, g.faces, g.labels, g.symmetries[0], r.marginals, r.source_point_vertex,
-                                r.target_point_vertex, NEAR)
-    return p.limb_hit, p.limb_mass, p.off_mass, max((p.off[s.source].sum() / p.off.sum()
-                                                     for s in r.extraction.symmetries), default=0.0)
+    p = evaluate.partial_scores(
+        g.vertices, g.faces, g.labels, g.symmetries[0], r.marginals, r.source_point_vertex, r.target_point_vertex, NEAR
+    )
+    return (
+        p.limb_hit,
+        p.limb_mass,
+        p.off_mass,
+        max((p.off[s.source].sum() / p.off.sum() for s in r.extraction.symmetries), default=0.0),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -133,8 +153,10 @@ def test_offset_calibration_keeps_every_image_of_a_five_fold_star(mode):
     shape = Shape(star.vertices, star.faces)
     run = intrinsym.detect if mode == "detect" else lambda s, p: intrinsym.match(s, s, p)
     sizes = dict(SMALL, iterations=1)
-    kept = {c: _images_kept(run(shape, intrinsym.make_params(calibration=c, eigenpairs=30, **sizes)), star)
-            for c in ("both", "descriptor")}
+    kept = {
+        c: _images_kept(run(shape, intrinsym.make_params(calibration=c, eigenpairs=30, **sizes)), star)
+        for c in ("both", "descriptor")
+    }
     assert kept["both"] >= 0.6 and kept["descriptor"] <= 0.4, kept
 
 
@@ -150,13 +172,20 @@ def test_local_calibration_keeps_every_other_vertex_of_the_cuboctahedron():
     to_corner = geodesics.distances_from(graph, corners)
     kept = {}
     for calibration in ("both", "local"):
-        params = intrinsym.make_params(n_source=60, n_target=600, calibration=calibration, iterations=1,
-                                       eigenpairs=40, spin_cloud=10000)
+        params = intrinsym.make_params(
+            n_source=60, n_target=600, calibration=calibration, iterations=1, eigenpairs=40, spin_cloud=10000
+        )
         r = intrinsym.detect(Shape(v, cubo.faces), params)
         row = r.unary / r.unary.max(axis=1, keepdims=True)
         samples = np.argmin(to_corner[:, r.source_point_vertex], axis=1)
-        kept[calibration] = np.mean([row[samples[i], to_corner[j, r.target_point_vertex] <= 0.1].max() >= 0.5
-                                     for i in range(12) for j in range(12) if j != i])
+        kept[calibration] = np.mean(
+            [
+                row[samples[i], to_corner[j, r.target_point_vertex] <= 0.1].max() >= 0.5
+                for i in range(12)
+                for j in range(12)
+                if j != i
+            ]
+        )
     assert kept["local"] >= 0.95 and kept["both"] <= 0.8, kept
 
 
@@ -170,8 +199,10 @@ def test_the_weighted_identity_keeps_off_limb_points_home_and_limbs_on_each_othe
     # either way.)
     g = partial_shape
     size = dict(PARTIAL, n_source=150, n_target=2000)
-    removed, weighted = (intrinsym.detect(Shape(g.vertices, g.faces), intrinsym.make_params(trivial_weight=w, **size))
-                         for w in (0.0, "auto"))
+    removed, weighted = (
+        intrinsym.detect(Shape(g.vertices, g.faces), intrinsym.make_params(trivial_weight=w, **size))
+        for w in (0.0, "auto")
+    )
     # "auto" sees that the removed identity's BP map is no near-isometry and keeps it
     identity = weighted.info.identity
     assert identity.isometry < identity.threshold and identity.weight == intrinsym.params.NO_PARTNER_WEIGHT

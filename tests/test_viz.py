@@ -86,12 +86,12 @@ def test_marginal_figure_is_red_where_the_marginal_peaks(tmp_path):
     img = imread(viz.marginal_figure(shape, result, 0, tmp_path / "m.png", params))
     red, blue = _red(img), _blue(img)
     assert red.sum() > 20 and blue.sum() > 20 * red.sum() / 10
-    body = (img[..., :3].sum(axis=2) < 2.9)  # not the white background
+    body = img[..., :3].sum(axis=2) < 2.9  # not the white background
     ys, xs = np.nonzero(body)
     ry, rx = np.nonzero(red)
     # The red spot sits in the middle of the disc the camera looks at, the rim is blue.
     assert abs(rx.mean() - xs.mean()) < 0.1 * np.ptp(xs) and abs(ry.mean() - ys.mean()) < 0.15 * np.ptp(ys)
-    assert not red[ys.min():ys.min() + 5].any()
+    assert not red[ys.min() : ys.min() + 5].any()
 
 
 def test_default_source_prefers_a_far_peak(tmp_path):
@@ -113,9 +113,13 @@ def test_render_writes_marginal_graph_and_one_png_per_symmetry(tmp_path):
     paths = viz.render(out, params=params)
     assert [p.name for p in paths] == ["marginal.png", "graph.png"]  # no symmetries.json: none drawn
     assert all(p.parent == out / "figures" for p in paths)
-    record = {"kind": "partial", "score": 0.5, "pairs": [[0, 1]],
-              "source_vertices": np.flatnonzero(v[:, 0] > 0.3).tolist(),
-              "target_vertices": np.flatnonzero(v[:, 0] < -0.3).tolist()}
+    record = {
+        "kind": "partial",
+        "score": 0.5,
+        "pairs": [[0, 1]],
+        "source_vertices": np.flatnonzero(v[:, 0] > 0.3).tolist(),
+        "target_vertices": np.flatnonzero(v[:, 0] < -0.3).tolist(),
+    }
     (out / "symmetries.json").write_text(json.dumps([record, record, record]))
     paths = viz.render(out, source=2, params=params, max_symmetries=2)
     assert [p.name for p in paths] == ["marginal.png", "graph.png", "symmetry_1.png", "symmetry_2.png"]
@@ -131,8 +135,11 @@ def test_correspondence_colors_follow_the_point_map(tmp_path):
     mirror = cKDTree(v).query(v * [-1, 1, 1])[1]
     left, right = np.flatnonzero(v[:, 0] > 0.1), np.flatnonzero(v[:, 0] < -0.1)
     samples = left[::5]
-    record = {"source_vertices": left.tolist(), "target_vertices": right.tolist(),
-              "pairs": np.column_stack([samples, mirror[samples]]).tolist()}
+    record = {
+        "source_vertices": left.tolist(),
+        "target_vertices": right.tolist(),
+        "pairs": np.column_stack([samples, mirror[samples]]).tolist(),
+    }
     src, tgt = viz.correspondence_colors(v, record)
     outside = np.setdiff1d(np.arange(len(v)), left)
     assert np.allclose(src[outside], viz.BASE) and np.allclose(tgt[left], viz.BASE)
@@ -165,8 +172,9 @@ def test_figure_params_reject_bad_values():
 
 
 def run(*args):
-    return subprocess.run([sys.executable, "-m", "intrinsym.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "intrinsym.cli", *map(str, args)], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_cli_render_and_view(tmp_path):
@@ -219,8 +227,21 @@ def test_progress_keeps_stage_lines_and_shows_bp_iterations_transiently():
 
 
 def test_detect_with_figures_and_no_progress_when_stderr_is_not_a_terminal(tmp_path):
-    p = run("detect", "--example", "-o", tmp_path / "o", "--source", "20", "--target", "200",
-            "--spin-cloud", "3000", "--iterations", "2", "--figures")
+    p = run(
+        "detect",
+        "--example",
+        "-o",
+        tmp_path / "o",
+        "--source",
+        "20",
+        "--target",
+        "200",
+        "--spin-cloud",
+        "3000",
+        "--iterations",
+        "2",
+        "--figures",
+    )
     assert p.returncode == 0, p.stderr
     assert p.stderr == ""
     assert "symmetries:" in p.stdout and "figures: marginal.png, graph.png" in p.stdout

@@ -4,8 +4,9 @@ extraction -> global map.
 :func:`detect` matches a shape to itself (partial intrinsic symmetries); :func:`match`
 matches shape A to shape B (the paper's ambiguous two-shape case). Both return a
 :class:`~intrinsym.result.Result`. The steps between (:func:`source_graph`,
-:func:`pairwise_model`, :func:`unary_model`, :func:`solve_bp`, :func:`extract_symmetries`,
-:func:`refine_global_map`) each take and return arrays and can run alone.
+:func:`pairwise_model`, :func:`unary_model`, :func:`solve_bp`, :func:`extraction_support`,
+:func:`extract_symmetries`, :func:`intrinsym.globalmap.choose_global_map`) each take and
+return arrays and can run alone.
 """
 
 from __future__ import annotations
@@ -18,16 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from . import bp, geodesics, model, resources, sampling, spectral, unary
+from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
-from .extract import Extraction, Symmetry, consistency, extract_from_support
-from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, ZOOMOUT_AGREEMENT, Params, make_params
+from .extract import Extraction, consistency, extract_from_support
+from .globalmap import choose_global_map
+from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
 from .result import Result
-from .runinfo import BPStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, ZoomOutStats, versions
+from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
 from .support import SourceGraph, Support
 from .surface import ShapeLike, Surface, as_shape, prepare, sample
-from .vertex_maps import agreement
 
 log = logging.getLogger("intrinsym")
 
@@ -156,19 +157,16 @@ def solve_bp(
     p: Params,
     self_match: bool,
     n_passes: int,
-    t_spacing: float,
     progress: ProgressCallback | None,
+    weight: float | None = None,
 ) -> BPOutcome:
-    """BP on the MRF (``mrf.unary`` is replaced by the weakened ``phi``), the identity
-    decision of ``trivial_weight="auto"``, and the further passes."""
+    """BP on the MRF (``mrf.unary`` is replaced by ``phi`` with the trivial match
+    weakened to ``weight``, default ``p.trivial_weight``, 0 for "auto"), then the
+    further passes. The identity decision of "auto" (BP again at ``NO_PARTNER_WEIGHT``)
+    is :func:`_solve`'s."""
     trivial = self_match and p.remove_trivial and p.trivial_radius > 0
-    auto = p.trivial_weight == "auto"
-    weight = 0.0 if auto else float(p.trivial_weight)
-
-    def weakened(weight: float) -> np.ndarray:
-        return (
-            model.suppress_trivial(phi, near, p.trivial_radius, floor, weight) if trivial and near is not None else phi
-        ).astype(np.float32)
+    if weight is None:
+        weight = 0.0 if p.trivial_weight == "auto" else float(p.trivial_weight)
 
     def on_iteration(it: int, change: float) -> None:
         log.debug("bp iteration %d: max message change %.3g", it, change)
@@ -188,20 +186,11 @@ def solve_bp(
             backend=p.backend,
         )
 
-    mrf = dataclasses.replace(mrf, unary=weakened(weight))
+    weakened = (
+        model.suppress_trivial(phi, near, p.trivial_radius, floor, weight) if trivial and near is not None else phi
+    )
+    mrf = dataclasses.replace(mrf, unary=weakened.astype(np.float32))
     runs = [run(mrf)]
-    identity = IdentityDecision(weight) if trivial else None
-    if trivial and auto:
-        # With the identity removed every row puts its mass somewhere, and on a shape
-        # without a global symmetry BP invents a self-map that keeps short distances
-        # only roughly; a true, posed symmetry's argmax keeps nearly all of them.
-        graph = SourceGraph.from_edges(mrf.edges, mrf.edge_length, len(phi))
-        kept = consistency(runs[0].marginals.argmax(axis=1), graph, mrf.targets, max(p.d_error, t_spacing))
-        identity = IdentityDecision(weight, kept, p.isometry_threshold)
-        if kept < p.isometry_threshold:
-            identity = IdentityDecision(NO_PARTNER_WEIGHT, kept, p.isometry_threshold, runs[0].iterations)
-            mrf = dataclasses.replace(mrf, unary=weakened(NO_PARTNER_WEIGHT))
-            runs = [run(mrf)]
     first_unary = mrf.unary
     marginals = runs[0].marginals.astype(np.float32)
     passes: list[tuple[np.ndarray, np.ndarray]] = []
@@ -215,23 +204,20 @@ def solve_bp(
         )
         runs.append(run(mrf))
         passes.append((runs[-1].marginals.astype(np.float32), mrf.unary))
-    return BPOutcome(first_unary, marginals, passes, runs, identity)
+    return BPOutcome(first_unary, marginals, passes, runs, IdentityDecision(weight) if trivial else None)
 
 
-def extract_symmetries(
+def extraction_support(
     src: Surface,
     tgt: Surface,
     ps: np.ndarray,
     pt: np.ndarray,
-    edges: np.ndarray,
     pair: Pairwise,
     edge_length: np.ndarray,
-    outcome: BPOutcome,
-    p: Params,
     self_match: bool,
-) -> tuple[Support, Extraction]:
-    """The extraction's support (Voronoi cells, geodesics) and the symmetries of all passes."""
-    support = Support(
+) -> Support:
+    """The extraction's support: Voronoi cells of the samples and the target geodesics."""
+    return Support(
         edge_length=edge_length,
         targets=pair.targets,
         vertex_source=geodesics.voronoi_cells(src.graph, ps)[src.vertex_map],
@@ -240,8 +226,21 @@ def extract_symmetries(
         source_mesh_vertices=src.input_vertices,
         target_mesh_vertices=tgt.input_vertices,
     )
+
+
+def extract_symmetries(
+    src: Surface,
+    tgt: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
+    edges: np.ndarray,
+    support: Support,
+    outcome: BPOutcome,
+    p: Params,
+) -> Extraction:
+    """The symmetries of all passes of a BP outcome."""
     no_partner = outcome.identity is not None and outcome.identity.weight > 0
-    extraction = extract_from_support(
+    return extract_from_support(
         outcome.marginals,
         edges,
         support,
@@ -251,61 +250,6 @@ def extract_symmetries(
         unary=outcome.unary,
         passes=outcome.passes,
     )
-    return support, extraction
-
-
-def refine_global_map(
-    surface: Surface,
-    ps: np.ndarray,
-    pt: np.ndarray,
-    source_vertex: np.ndarray,
-    symmetry: Symmetry,
-    support: Support,
-    evecs: np.ndarray,
-    p: Params,
-) -> tuple[np.ndarray | None, float]:
-    """The global symmetry of a self-matching run refined by seeded ZoomOut.
-
-    The symmetry's sample pairs seed :func:`intrinsym.spectral.seeded_symmetry` on the
-    working shape; its map goes back to the input vertices (nearest input vertex) and
-    is kept when it sends at least ``ZOOMOUT_AGREEMENT`` of the pairs near their
-    targets (:func:`intrinsym.vertex_maps.agreement`).
-
-    Parameters
-    ----------
-    surface : Surface
-    ps, pt : (S,), (T,) int64
-        Working vertices of the source and target samples.
-    source_vertex : (S,) int64
-        Input vertex of every source sample.
-    symmetry : Symmetry
-        The global symmetry (sample indices).
-    support : Support
-    evecs : (N, K) float array
-        Laplace-Beltrami eigenfunctions of the working shape, constant first.
-    p : Params
-
-    Returns
-    -------
-    zoomout_map : (N_in,) int64 or None
-        Image of every input vertex; None when the guard rejects the map.
-    agreement : float
-    """
-    vertices = surface.shape.vertices
-    # only the working vertices of input vertices are mapped, onto those same vertices
-    image = spectral.seeded_symmetry(
-        vertices,
-        evecs,
-        ps[symmetry.source],
-        pt[symmetry.target],
-        p.zoomout_seed,
-        p.zoomout_final,
-        points=surface.vertex_map,
-        candidates=np.unique(surface.vertex_map),
-    )
-    zoomout_map = surface.nearest_input_vertex(vertices[image])
-    kept = agreement(symmetry, zoomout_map, source_vertex, support)
-    return (zoomout_map if kept >= ZOOMOUT_AGREEMENT else None), kept
 
 
 def _bp_stats(runs: list[bp.BPResult]) -> BPStats:
@@ -340,18 +284,45 @@ def _solve(
     clock.lap("descriptors")
     mrf = model.MRF(phi.astype(np.float32), edges, edge_length, pair.targets, pair.lam, p.rho)
     clock.lap("unary")
-    outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, t_spacing, clock.progress)
+    outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
+    if outcome.identity is not None and p.trivial_weight == "auto":
+        # With the identity removed every row puts its mass somewhere, and on a shape
+        # without a global symmetry BP invents a self-map that keeps short distances
+        # only roughly; a true, posed symmetry's argmax keeps nearly all of them.
+        graph = SourceGraph.from_edges(edges, edge_length, len(ps))
+        kept = consistency(outcome.marginals.argmax(axis=1), graph, pair.targets, max(p.d_error, t_spacing))
+        identity = IdentityDecision(0.0, kept, p.isometry_threshold)
+        if kept < p.isometry_threshold:
+            iterations = outcome.runs[0].iterations
+            outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
+            identity = IdentityDecision(NO_PARTNER_WEIGHT, kept, p.isometry_threshold, iterations)
+        outcome = dataclasses.replace(outcome, identity=identity)
     clock.lap("bp")
-    support, extraction = extract_symmetries(src, tgt, ps, pt, edges, pair, edge_length, outcome, p, self_match)
+    support = extraction_support(src, tgt, ps, pt, pair, edge_length, self_match)
+    extraction = extract_symmetries(src, tgt, ps, pt, edges, support, outcome, p)
     clock.lap("extract")
     source_vertex = src.nearest_input_vertex(src.shape.vertices[ps])
-    zoomout_map, zoomout = None, None
-    if self_match and p.zoomout and extraction.global_symmetry is not None and spectra is not None:
-        zoomout_map, kept = refine_global_map(
-            src, ps, pt, source_vertex, extraction.global_symmetry, support, spectra[0][1], p
+    chosen = None
+    if self_match and extraction.global_symmetry is not None:
+        fit = (
+            edges,
+            src.to_input(src.shape.vertices[ps]),
+            tgt.to_input(tgt.shape.vertices[pt]),
+            tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
         )
-        zoomout = ZoomOutStats(kept, zoomout_map is not None)
-        clock.lap("zoomout")
+        chosen = choose_global_map(
+            src,
+            ps,
+            pt,
+            source_vertex,
+            outcome.marginals,
+            extraction.global_symmetry,
+            support,
+            None if spectra is None else spectra[0],
+            fit,
+            p,
+        )
+        clock.lap("global_map")
     sizes = Sizes(
         source=len(ps),
         target=len(pt),
@@ -378,7 +349,7 @@ def _solve(
         seconds=clock.seconds,
         bp=_bp_stats(outcome.runs),
         identity=outcome.identity,
-        zoomout=zoomout,
+        global_map=None if chosen is None else GlobalMapStats(chosen.source, chosen.mass, chosen.masses),
         versions=versions(),
     )
     return Result(
@@ -393,7 +364,7 @@ def _solve(
         info=info,
         support=support,
         extraction=extraction,
-        zoomout_map=zoomout_map,
+        zoomout_map=None if chosen is None else chosen.vertex_map,
         pass_marginals=np.stack([m for m, _ in outcome.passes]) if outcome.passes else None,
     )
 

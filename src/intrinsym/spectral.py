@@ -59,6 +59,7 @@ __all__ = [
     "seeded_symmetry",
     "sign_candidates",
     "spectral_symmetry",
+    "symmetry_candidates",
     "zoomout",
 ]
 
@@ -291,18 +292,68 @@ def spectral_symmetry(
         of range, or every candidate refines to the identity (no symmetry found).
     """
     v = np.asarray(vertices, dtype=np.float64)
-    spread, n_samples = _spread(v, n_samples, n_targets, n_final)
     evals, evecs = descriptors.eigenpairs(v, faces, n_final + 1)
-    phi = evecs[:, 1:]
-    chosen = isolated_eigenvalues(evals[1:], n_signs, min_gap)
+    maps, distortions = symmetry_candidates(
+        v, evals, evecs, n_signs, n_final, n_candidates, n_samples, n_targets, min_gap
+    )
+    if not maps:
+        raise ValueError(f"all {n_candidates} candidate sign vectors refine to the identity")
+    phi = evecs[:, 1 : n_final + 1]
+    return nearest_images(phi, phi, maps[int(np.argmin(distortions))])
+
+
+def symmetry_candidates(
+    vertices: np.ndarray,
+    evals: np.ndarray,
+    evecs: np.ndarray,
+    n_signs: int = 8,
+    n_final: int = 50,
+    n_candidates: int = 4,
+    n_samples: int = 500,
+    n_targets: int = 3000,
+    min_gap: float = 0.05,
+) -> tuple[list[np.ndarray], list[float]]:
+    """The candidate symmetries of :func:`spectral_symmetry` as functional maps.
+
+    The best ``n_candidates`` sign vectors, each refined by ZoomOut; the candidates that
+    fall back to the identity are dropped.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+    evals, evecs : (K,), (N, K) float arrays
+        Laplace-Beltrami eigenpairs, ascending, the constant mode first, K > ``n_final``
+        (fewer: ``n_final`` is clamped to K - 1).
+    n_signs, n_final, n_candidates, n_samples, n_targets, min_gap
+        As in :func:`spectral_symmetry`.
+
+    Returns
+    -------
+    maps : list of (n_final, n_final) float64
+        Functional maps ``C``: vertex x maps to the vertex whose ``evecs[:, 1:n_final+1]``
+        row is nearest to ``evecs[x, 1:n_final+1] @ C`` (:func:`nearest_images`).
+    distortions : list of float
+        Their commute-time distortion (:func:`distortion`), in the same order.
+
+    Raises
+    ------
+    ValueError
+        If no eigenvalue below ``n_final`` is isolated by ``min_gap`` or the sizes are
+        out of range.
+    """
+    n_final = min(n_final, evecs.shape[1] - 1)
+    spread, n_samples = _spread(np.asarray(vertices, dtype=np.float64), n_samples, n_targets, n_final)
+    phi = np.asarray(evecs, dtype=np.float64)[:, 1 : n_final + 1]
+    lam = np.asarray(evals, dtype=np.float64)[1 : n_final + 1]
+    chosen = isolated_eigenvalues(lam, n_signs, min_gap)
     if len(chosen) == 0:
         raise ValueError(f"no eigenvalue among the first {n_final} is isolated by {min_gap}")
     targets = phi[spread]
     samples = targets[:n_samples]
     signs, _ = sign_candidates(samples[:, chosen], n_candidates)
-    commute = targets / np.sqrt(evals[1:])
+    commute = targets / np.sqrt(lam)
     tree = cKDTree(targets[:, chosen])
-    best, best_distortion = None, np.inf
+    maps, distortions = [], []
     for s in signs:
         images = tree.query(samples[:, chosen] * s)[1]
         images, C = zoomout(samples, targets, images, int(chosen[-1]) + 1)
@@ -310,12 +361,9 @@ def spectral_symmetry(
         # identity, whose distortion is zero
         if np.all(np.diag(C)[chosen] > 0):
             continue
-        score = distortion(commute[:n_samples], commute[images])
-        if score < best_distortion:
-            best, best_distortion = C, score
-    if best is None:
-        raise ValueError(f"all {len(signs)} candidate sign vectors refine to the identity")
-    return nearest_images(phi, phi, best)
+        maps.append(C)
+        distortions.append(distortion(commute[:n_samples], commute[images]))
+    return maps, distortions
 
 
 def seeded_symmetry(

@@ -2,8 +2,7 @@
 
 :func:`vertex_map` gives each input vertex the image of the source sample whose
 geodesic Voronoi cell holds it; :func:`fitted_vertex_map` refines that by local linear
-fits (beyond the paper); :func:`agreement` measures how far any vertex map keeps a
-symmetry's sample pairs.
+fits (beyond the paper).
 """
 
 from __future__ import annotations
@@ -11,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import _extract_kernels as kernels
 from .extract import ExtractParams, Symmetry
 from .support import SourceGraph, Support
 
@@ -39,37 +37,6 @@ def vertex_map(symmetry: Symmetry, vertex_source: np.ndarray, target_vertex: np.
     image = np.append(symmetry.image(n_source), -1)
     sample = image[np.where(vertex_source >= 0, vertex_source, n_source)]
     return np.where(sample >= 0, np.asarray(target_vertex)[np.maximum(sample, 0)], -1).astype(np.int64)
-
-
-def agreement(symmetry: Symmetry, vertex_image: np.ndarray, source_vertex: np.ndarray, support: Support) -> float:
-    """How far a vertex map keeps a symmetry's sample pairs.
-
-    Parameters
-    ----------
-    symmetry : Symmetry
-    vertex_image : (N_a,) int64
-        Target input vertex of every source input vertex (-1 where none).
-    source_vertex : (S,) int64
-        Input vertex of every source sample.
-    support : Support
-
-    Returns
-    -------
-    float
-        Fraction of the pairs s -> t of ``symmetry`` whose source vertex the map sends
-        into the Voronoi cell of a target sample within ``support.targets.radius`` of t
-        (geodesic); 1.0 for an empty symmetry.
-    """
-    if not len(symmetry.source):
-        return 1.0
-    t = support.targets
-    image = np.asarray(vertex_image)[np.asarray(source_vertex)[symmetry.source]]
-    owner = np.where(image >= 0, np.asarray(support.vertex_target)[np.maximum(image, 0)], -1)
-    kept = [
-        b >= 0 and kernels.find(t.indptr, t.indices, t.dist, a, b, t.radius) <= t.radius
-        for a, b in zip(symmetry.target, owner)
-    ]
-    return float(np.mean(kept))
 
 
 def _members(owner: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -365,7 +365,10 @@ def write(
     result = Result.load(out)
     shape, _ = viz.load_shapes(result, mesh_path)
     scores_path = out / "scores.json"
-    scores = json.loads(scores_path.read_text()) if scores_path.is_file() else None
+    try:
+        scores = json.loads(scores_path.read_text()) if scores_path.is_file() else None
+    except (OSError, ValueError) as err:
+        raise InputError(f"{scores_path}: cannot read it ({err}); run intrinsym evaluate again") from None
     html = render_html(payload(result, shape, viz.load_symmetries(out), scores, up))
     path = Path(html_path) if html_path is not None else out / "viewer.html"
 

@@ -1,0 +1,191 @@
+"""How far the marginals support a map: the marginal mass it keeps, and a reliability check.
+
+A source sample's marginals are the model's distribution over where it maps. The share of
+that distribution within ``radius`` of the sample's image under a map (:func:`mass_within`)
+says how far the model supports that image; its mean over the samples is the marginal
+mass the map keeps (:func:`kept_mass`): near 1 when the marginals agree with the map
+everywhere, low for a patchwork or for a map the marginals do not support. It judges
+between candidate global maps (:mod:`intrinsym.globalmap`), and every vertex takes the
+value of the source sample whose Voronoi cell holds it (:func:`vertex_confidence`,
+:func:`map_mass`: ``symmetry_mass.npy``).
+
+The mass is not a calibrated probability: BP's marginals are sharper than the map's
+errors on posed shapes (docs/results.md measures it with :func:`calibration`, the
+reliability table and expected calibration error of any per-vertex score).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geodesics import SparseDistances
+from .support import Support
+
+__all__ = [
+    "Bin",
+    "calibration",
+    "kept_mass",
+    "map_mass",
+    "mass_within",
+    "sample_images",
+    "vertex_confidence",
+]
+
+
+def mass_within(marginals: np.ndarray, image: np.ndarray, targets: SparseDistances, radius: float) -> np.ndarray:
+    """Marginal mass of every source sample within ``radius`` of its image.
+
+    Parameters
+    ----------
+    marginals : (S, T) float array
+        Marginals (any positive scale per row; rows are normalised here).
+    image : (S,) int array
+        Target sample of each source sample's image, -1 for none.
+    targets : SparseDistances
+        Target-target geodesics; ``radius`` is clipped to theirs.
+    radius : float
+        Length units of ``targets`` (normalised: unit sqrt(area)).
+
+    Returns
+    -------
+    (S,) float64 in [0, 1]
+        0 where ``image`` is -1.
+    """
+    image = np.asarray(image, dtype=np.int64)
+    m = np.asarray(marginals, dtype=np.float64)
+    total = m.sum(axis=1)
+    out = np.zeros(len(image))
+    for s in np.flatnonzero((image >= 0) & (total > 0)):
+        lo, hi = targets.indptr[image[s]], targets.indptr[image[s] + 1]
+        near = targets.indices[lo:hi][targets.dist[lo:hi] <= radius]
+        out[s] = m[s, near].sum() / total[s]
+    return out
+
+
+def kept_mass(marginals: np.ndarray, image: np.ndarray, targets: SparseDistances, radius: float) -> float:
+    """Mean of :func:`mass_within` over the source samples (unmapped ones count 0)."""
+    return float(mass_within(marginals, image, targets, radius).mean()) if len(image) else 0.0
+
+
+def sample_images(vertex_image: np.ndarray, source_vertex: np.ndarray, vertex_target: np.ndarray) -> np.ndarray:
+    """The target sample a dense map sends each source sample to.
+
+    Parameters
+    ----------
+    vertex_image : (N,) int array
+        Image input vertex of every input vertex, -1 for none.
+    source_vertex : (S,) int array
+        Input vertex of every source sample.
+    vertex_target : (N,) int array
+        Target sample whose Voronoi cell holds each input vertex (``Support.vertex_target``).
+
+    Returns
+    -------
+    (S,) int64, -1 where the map has no image.
+    """
+    image = np.asarray(vertex_image, dtype=np.int64)[np.asarray(source_vertex, dtype=np.int64)]
+    cell = np.asarray(vertex_target, dtype=np.int64)
+    return np.where(image >= 0, cell[np.maximum(image, 0)], -1)
+
+
+def vertex_confidence(sample_confidence: np.ndarray, vertex_source: np.ndarray) -> np.ndarray:
+    """Per input vertex, the confidence of the source sample whose Voronoi cell holds it.
+
+    Parameters
+    ----------
+    sample_confidence : (S,) float array
+    vertex_source : (N,) int array
+        Source sample of every input vertex (``Support.vertex_source``), -1 for none.
+
+    Returns
+    -------
+    (N,) float32, 0 where a vertex has no sample.
+    """
+    owner = np.asarray(vertex_source, dtype=np.int64)
+    conf = np.asarray(sample_confidence, dtype=np.float32)
+    return np.where(owner >= 0, conf[np.maximum(owner, 0)], 0.0).astype(np.float32)
+
+
+def map_mass(
+    marginals: np.ndarray, vertex_image: np.ndarray, source_vertex: np.ndarray, support: Support, radius: float
+) -> np.ndarray:
+    """Per input vertex, the marginal mass a dense map keeps (``symmetry_mass.npy``).
+
+    Parameters
+    ----------
+    marginals : (S, T) float array
+    vertex_image : (N,) int array
+        The map: image input vertex of every input vertex, -1 for none.
+    source_vertex : (S,) int array
+        Input vertex of every source sample.
+    support : Support
+        Its Voronoi cells (input vertex -> sample) and target geodesics.
+    radius : float
+        Normalised length (unit sqrt(area)).
+
+    Returns
+    -------
+    (N,) float32 in [0, 1]
+        The marginal mass of the vertex's source sample within ``radius`` of where the map
+        sends that sample (:func:`mass_within`); 0 where the map has no image.
+    """
+    image = sample_images(vertex_image, source_vertex, support.vertex_target)
+    conf = vertex_confidence(mass_within(marginals, image, support.targets, radius), support.vertex_source)
+    return np.where(np.asarray(vertex_image) >= 0, conf, 0.0).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class Bin:
+    """One bin of a reliability table.
+
+    Attributes
+    ----------
+    low, high : float
+        Confidence range [low, high) (the last bin includes 1).
+    share : float
+        Fraction of the items in the bin.
+    confidence : float
+        Their mean confidence (nan for an empty bin).
+    accuracy : float
+        Fraction of them that are correct (nan for an empty bin).
+    """
+
+    low: float
+    high: float
+    share: float
+    confidence: float
+    accuracy: float
+
+
+def calibration(confidence: np.ndarray, correct: np.ndarray, n_bins: int = 10) -> tuple[float, list[Bin]]:
+    """Reliability table and expected calibration error of a confidence.
+
+    Parameters
+    ----------
+    confidence : (N,) float array in [0, 1]
+    correct : (N,) bool array
+        Whether each item is right (for a map: its image within 0.05 of the true one).
+    n_bins : int
+        Equal-width bins over [0, 1].
+
+    Returns
+    -------
+    ece : float
+        Sum over the bins of share x |accuracy - confidence| (0: calibrated).
+    bins : list of Bin
+    """
+    conf = np.asarray(confidence, dtype=np.float64)
+    ok = np.asarray(correct, dtype=bool)
+    which = np.minimum((conf * n_bins).astype(np.int64), n_bins - 1)
+    bins, ece = [], 0.0
+    for b in range(n_bins):
+        inside = which == b
+        share = float(inside.mean()) if len(conf) else 0.0
+        mean_conf = float(conf[inside].mean()) if inside.any() else float("nan")
+        accuracy = float(ok[inside].mean()) if inside.any() else float("nan")
+        if inside.any():
+            ece += share * abs(accuracy - mean_conf)
+        bins.append(Bin(b / n_bins, (b + 1) / n_bins, share, mean_conf, accuracy))
+    return ece, bins

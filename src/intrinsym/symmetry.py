@@ -1,0 +1,149 @@
+"""The extraction's records: its parameters, a symmetric part pair, and all of a result's.
+
+:class:`ExtractParams` configures :mod:`intrinsym.extract`; a :class:`Symmetry` is one
+symmetric part pair (source samples -> target samples); an :class:`Extraction` holds the
+ranked symmetries of a result and which one is global. Lengths are in units of
+sqrt(surface area).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Extraction", "ExtractParams", "Symmetry"]
+
+
+@dataclass(frozen=True)
+class ExtractParams:
+    """Parameters of the extraction. Lengths in units of sqrt(surface area).
+
+    Attributes
+    ----------
+    threshold : float
+        Peak threshold t on the max-normalised marginal (paper: t in [0.5, 0.75]).
+    d_error : float
+        Geodesic error bound of the region growing (paper: d_error in [0.001, 0.15]).
+        The default is about two target spacings at the default |Pt| = 4000.
+    peak_radius : float
+        Distinct peaks of one marginal are at least this far apart (non-maximum
+        suppression); also the tolerance within which two maps agree on a point.
+    identity_radius : float
+        A correspondence is trivial when its target lies within this distance of the
+        source point itself (self-matching only); a map seeded at a trivial
+        correspondence is the identity, any other map never takes trivial ones.
+    global_fraction : float
+        The dominant non-identity symmetry is "global" when it covers at least this
+        fraction of the source samples (and its pairs average ``threshold`` on the
+        normalised marginals).
+    seeds_per_sample : int
+        :func:`extract` seeds region growings from at most this many (the strongest)
+        peaks of each source sample.
+    min_fraction : float
+        Smallest symmetry that :func:`extract` reports, as a fraction of |Ps| (at least
+        one sample).
+    max_count : int
+        At most this many symmetries per BP pass are reported (the best ranked).
+    keep_identity : bool
+        Report identity symmetries too.
+    unary_seeds : bool
+        When :func:`extract` or :func:`query` is given the unary, also seed parts from
+        its peaks (beyond the paper; see :func:`extract`).
+    no_partner : bool
+        The trivial match was kept in the model at a weight (``trivial_weight`` > 0):
+        a row whose marginals peak on the identity then says "no symmetric partner",
+        and the unary's parts do not grow into it (see :func:`extract`).
+    vertex_fit : float
+        :func:`intrinsym.vertex_maps.fitted_vertex_map` maps the input vertices of a
+        sample's Voronoi cell through the linear map fitted to the sample's mapped
+        neighbours when every neighbour's relative residual is at most this (beyond the
+        paper; 0, the default: each vertex takes its sample's image,
+        :func:`intrinsym.vertex_maps.vertex_map`).
+    """
+
+    threshold: float = 0.5
+    d_error: float = 0.03
+    peak_radius: float = 0.05
+    identity_radius: float = 0.05
+    global_fraction: float = 0.5
+    seeds_per_sample: int = 6
+    min_fraction: float = 0.05
+    max_count: int = 32
+    keep_identity: bool = False
+    unary_seeds: bool = True
+    no_partner: bool = False
+    vertex_fit: float = 0.0
+
+    def __post_init__(self) -> None:
+        checks = [
+            (not 0 < self.threshold <= 1, "threshold must lie in (0, 1]"),
+            (self.d_error <= 0, "d_error must be positive"),
+            (self.peak_radius < 0, "peak_radius must be non-negative"),
+            (self.identity_radius < 0, "identity_radius must be non-negative"),
+            (not 0 < self.global_fraction <= 1, "global_fraction must lie in (0, 1]"),
+            (not 0 <= self.min_fraction <= 1, "min_fraction must lie in [0, 1]"),
+            (self.max_count < 1, "max_count must be at least 1"),
+            (self.seeds_per_sample < 1, "seeds_per_sample must be at least 1"),
+            (self.vertex_fit < 0, "vertex_fit must be non-negative"),
+        ]
+        for bad, message in checks:
+            if bad:
+                raise ValueError(message)
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """A symmetric part pair: source samples and their images.
+
+    Attributes
+    ----------
+    source : (k,) int64
+        Source sample indices, ascending.
+    target : (k,) int64
+        Target sample index of the image of each ``source`` entry.
+    score : float
+        In [0, 1]: the sum over the pairs of the max-normalised marginal, divided by
+        |Ps|, times ``consistency``; 1 = the whole shape, each point at its marginal's
+        maximum, every edge geodesically consistent.
+    consistency : float
+        Fraction of source edges inside the part whose images keep their length within
+        ``d_error`` (1.0 for a part without internal edges).
+    kind : {"identity", "partial", "global"}
+    """
+
+    source: np.ndarray
+    target: np.ndarray
+    score: float
+    consistency: float
+    kind: str
+
+    def image(self, n_source: int) -> np.ndarray:
+        """(n_source,) int64: target sample of every source sample, -1 outside the part."""
+        out = np.full(n_source, -1, dtype=np.int64)
+        out[self.source] = self.target
+        return out
+
+
+@dataclass(frozen=True)
+class Extraction:
+    """All symmetries of a result, ranked, and the dominant global one.
+
+    Attributes
+    ----------
+    symmetries : list of Symmetry
+        Ranked by score, best first (identity included only when asked).
+    global_index : int
+        Index into ``symmetries`` of the global symmetry, -1 when there is none
+        (:attr:`global_symmetry` is that symmetry or None).
+    params : ExtractParams
+    """
+
+    symmetries: list[Symmetry]
+    global_index: int
+    params: ExtractParams
+
+    @property
+    def global_symmetry(self) -> Symmetry | None:
+        """The global symmetry (``symmetries[global_index]``), None when there is none."""
+        return self.symmetries[self.global_index] if self.global_index >= 0 else None
