@@ -40,11 +40,10 @@ import numpy as np
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
 from intrinsym import _extract_kernels as kernels
-from intrinsym import evaluate, geodesics, shapes, spectral, unary
+from intrinsym import evaluate, geodesics, shapes, unary
 from intrinsym.confidence import calibration, map_mass, mass_within, sample_images
 from intrinsym.extract import Symmetry, consistency
-from intrinsym.globalmap import _best_spectral
-from intrinsym.params import MAP_MARGIN
+from intrinsym.globalmap import best_spectral, choose, zoomout_map
 from intrinsym.pipeline import _min_vertices, extract_result
 from intrinsym.shape import Shape, clean, surface_area
 from intrinsym.support import SourceGraph
@@ -176,7 +175,6 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
     spectrum = unary.spectrum(surf, p.eigenpairs)
     source_vertex = result.source_point_vertex
-    vertices = surf.shape.vertices
     maps = {
         "extraction": fitted_vertex_map(
             sym,
@@ -188,17 +186,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
             p.extraction(False),
         )
     }
-    image = spectral.seeded_symmetry(
-        vertices,
-        spectrum[1],
-        ps[sym.source],
-        pt[sym.target],
-        p.zoomout_seed,
-        p.zoomout_final,
-        points=surf.vertex_map,
-        candidates=np.unique(surf.vertex_map),
-    )
-    maps["zoomout"] = surf.nearest_input_vertex(vertices[image])
+    maps["zoomout"] = zoomout_map(surf, ps, pt, sym, spectrum[1], p)
 
     def images(vmap: np.ndarray) -> np.ndarray:
         return sample_images(vmap, source_vertex, result.support.vertex_target)
@@ -206,7 +194,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     def mass_of(vmap: np.ndarray) -> float:
         return float(mass_within(result.marginals, images(vmap), targets, p.mass_radius).mean())
 
-    found = _best_spectral(surf, source_vertex, spectrum, mass_of, p)
+    found = best_spectral(surf, source_vertex, spectrum, mass_of, p)
     if found is not None:
         maps["spectral"] = found[0]
     row["guard"] = _guard_agreement(sym, maps["zoomout"], source_vertex, result.support)
@@ -220,10 +208,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
             arrays[f"err_{key}"] = err
     row["rule_before"] = "zoomout" if row["guard"] >= GUARD else "extraction"
     row["rule_most_mass"] = max(("extraction", "zoomout"), key=lambda k: row[f"{k}_mass"])
-    row["rule_now"] = "zoomout" if row["zoomout_mass"] >= row["extraction_mass"] - MAP_MARGIN else "extraction"
-    if "spectral_mass" in row and row[f"{row['rule_now']}_mass"] < p.fallback_mass:
-        if row["spectral_mass"] > row[f"{row['rule_now']}_mass"] + MAP_MARGIN:
-            row["rule_now"] = "spectral"
+    row["rule_now"] = choose({key: row[f"{key}_mass"] for key in maps}, p.fallback_mass)
     return row, arrays
 
 

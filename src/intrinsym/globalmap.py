@@ -67,6 +67,40 @@ def _input_images(surface: Surface, image: np.ndarray) -> np.ndarray:
     return surface.nearest_input_vertex(surface.shape.vertices[image])
 
 
+def zoomout_map(
+    surface: Surface, ps: np.ndarray, pt: np.ndarray, symmetry: Symmetry, evecs: np.ndarray, p: Params
+) -> np.ndarray:
+    """The symmetry's sample pairs refined by seeded ZoomOut, as the image of every input
+    vertex (:func:`intrinsym.spectral.seeded_symmetry` on the working shape, the first
+    ``p.zoomout_seed`` eigenfunctions fitted to the pairs, up to ``p.zoomout_final``).
+
+    Returns
+    -------
+    (N_in,) int64
+    """
+    image = spectral.seeded_symmetry(
+        surface.shape.vertices,
+        evecs,
+        ps[symmetry.source],
+        pt[symmetry.target],
+        p.zoomout_seed,
+        p.zoomout_final,
+        points=surface.vertex_map,
+        candidates=np.unique(surface.vertex_map),
+    )
+    return _input_images(surface, image)
+
+
+def choose(masses: dict[str, float], fallback_mass: float) -> str:
+    """The rule: ZoomOut's map ("zoomout") unless it keeps ``MAP_MARGIN`` less mass than
+    the extraction's ("extraction"); a "spectral" candidate, when scored, wins only if the
+    chosen map keeps less than ``fallback_mass`` and the candidate ``MAP_MARGIN`` more."""
+    best = "zoomout" if masses.get("zoomout", -1.0) >= masses["extraction"] - MAP_MARGIN else "extraction"
+    if "spectral" in masses and masses[best] < fallback_mass and masses["spectral"] > masses[best] + MAP_MARGIN:
+        best = "spectral"
+    return best
+
+
 def choose_global_map(
     surface: Surface,
     ps: np.ndarray,
@@ -116,29 +150,17 @@ def choose_global_map(
 
     maps = {"extraction": fitted_vertex_map(symmetry, support, *fit, p.extraction(False))}
     if p.zoomout and spectrum is not None and len(symmetry.source) >= p.zoomout_seed:
-        image = spectral.seeded_symmetry(
-            surface.shape.vertices,
-            spectrum[1],
-            ps[symmetry.source],
-            pt[symmetry.target],
-            p.zoomout_seed,
-            p.zoomout_final,
-            points=surface.vertex_map,
-            candidates=np.unique(surface.vertex_map),
-        )
-        maps["zoomout"] = _input_images(surface, image)
+        maps["zoomout"] = zoomout_map(surface, ps, pt, symmetry, spectrum[1], p)
     masses = {name: mass_of(m) for name, m in maps.items()}
-    best = "zoomout" if masses.get("zoomout", -1.0) >= masses["extraction"] - MAP_MARGIN else "extraction"
-    if p.zoomout and spectrum is not None and masses[best] < p.fallback_mass:
-        found = _best_spectral(surface, source_vertex, spectrum, mass_of, p)
+    if p.zoomout and spectrum is not None and masses[choose(masses, p.fallback_mass)] < p.fallback_mass:
+        found = best_spectral(surface, source_vertex, spectrum, mass_of, p)
         if found is not None:
             maps["spectral"], masses["spectral"] = found
-            if masses["spectral"] > masses[best] + MAP_MARGIN:
-                best = "spectral"
+    best = choose(masses, p.fallback_mass)
     return GlobalMap(np.asarray(maps[best], dtype=np.int64), masses[best], best, masses)
 
 
-def _best_spectral(
+def best_spectral(
     surface: Surface,
     source_vertex: np.ndarray,
     spectrum: tuple[np.ndarray, np.ndarray],
