@@ -12,7 +12,8 @@ of the default "auto", which decides on this pass's marginals), then from that r
 - the per-vertex marginal mass of the chosen map against its errors (reliability table and
   expected calibration error over all shapes with a truth);
 - the global/partial statistics of every shape, with and without a global symmetry: BP's
-  argmax edge share (the rule of "auto"), the edge share and kept mass of the extraction's
+  argmax edge share (the rule of "auto"), its long-range agreement
+  (:func:`long_range_agreement`), the edge share and kept mass of the extraction's
   global symmetry and of ZoomOut's map.
 
 Shapes: the TOSCA poses, KIDS and the mirror-posed shapes of ``tosca.py``; generated ones
@@ -79,6 +80,7 @@ NEGATIVE_MESHES = {"bunny": "static/stanford-bunny.obj", "fandisk": "static/fand
 #: The global/partial statistics tabulated, with their labels.
 STATISTICS = {
     "argmax_share": "BP argmax edge share",
+    "long_range": "long-range agreement of BP's argmax",
     "extraction_edges": "edge share of the extraction's map",
     "zoomout_edges": "edge share of ZoomOut's map",
     "extraction_mass": "mass kept by the extraction's map",
@@ -86,6 +88,26 @@ STATISTICS = {
 }
 #: The rule before: ZoomOut's map when it keeps this share of the symmetry's sample pairs.
 GUARD = 0.5
+
+
+#: Landmark samples of the long-range agreement, and its tolerance (units of sqrt(area)).
+LANDMARKS = 64
+LONG_RANGE_TOLERANCE = 0.05
+
+
+def long_range_agreement(graph, source: np.ndarray, image: np.ndarray, landmarks: int = LANDMARKS) -> float:
+    """Share of landmark samples x (evenly spaced in the sample order) whose median over
+    all samples y of |d(x, y) - d(image x, image y)| is below ``LONG_RANGE_TOLERANCE``:
+    whether a self-map keeps long geodesic distances, not only the short edges BP's
+    pairwise term asks it to keep. ``graph``: the working surface (unit area); ``source``,
+    ``image``: working vertices of the samples and of their images."""
+    pick = np.unique(np.linspace(0, len(source) - 1, min(landmarks, len(source))).round().astype(np.int64))
+    before = geodesics.distances_from(graph, source[pick])[:, source]
+    after = geodesics.distances_from(graph, image[pick])[:, image]
+    with np.errstate(invalid="ignore"):
+        distortion = np.abs(before - after)
+    distortion[np.isinf(before) & np.isinf(after)] = 0.0
+    return float(np.mean(np.median(distortion, axis=1) < LONG_RANGE_TOLERANCE))
 
 
 def _guard_agreement(sym: Symmetry, vmap: np.ndarray, source_vertex: np.ndarray, support) -> float:
@@ -163,16 +185,18 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     graph = SourceGraph.from_edges(result.edges, result.support.edge_length, n_s)
     tolerance = max(p.d_error, result.info.resolved.target_spacing)
     row: dict = {"shape": name, "negative": negative, "seconds": time.perf_counter() - t0}
-    row["argmax_share"] = consistency(result.marginals.argmax(axis=1), graph, targets, tolerance)
+    argmax = result.marginals.argmax(axis=1)
+    row["argmax_share"] = consistency(argmax, graph, targets, tolerance)
+    surf = prepare(mesh, _min_vertices(p))
+    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
+    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
+    row["long_range"] = long_range_agreement(surf.graph, ps, pt[argmax])
     sym = extraction.global_symmetry
     row["global"] = sym is not None
     arrays: dict = {}
     if sym is None:
         return row, arrays
     row["coverage"] = len(sym.source) / n_s
-    surf = prepare(mesh, _min_vertices(p))
-    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
-    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
     spectrum = unary.spectrum(surf, p.eigenpairs)
     source_vertex = result.source_point_vertex
     maps = {

@@ -69,7 +69,7 @@ from pathlib import Path
 import numpy as np
 
 import intrinsym
-from intrinsym import evaluate, spectral
+from intrinsym import evaluate, geodesics, spectral
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
 REFLECTION = {"scape": "scape/mesh000.off", "homer": "static/homer.obj", "cow": "static/cow.obj"}
@@ -78,7 +78,7 @@ REFLECTION_CLASS = "reflection"
 #: Marginal scores shown in the table (``score_marginals`` also gives breadth, kept in JSON).
 MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 
 
 # --------------------------------------------------------------------------- shapes
@@ -180,6 +180,33 @@ def decision(info) -> dict:
     }
 
 
+#: Equal-width bins of the per-vertex marginal mass in the reliability histogram.
+MASS_BINS = 20
+
+
+def reliability(result, shape, sym) -> dict | None:
+    """Per bin of the symmetry map's per-vertex marginal mass (``symmetry_mass``): how many
+    vertices fall in it and how many of them map within 0.05 / 0.10 of the true image
+    (graph geodesics, units of sqrt(area)); None on code without the mass."""
+    mass_of = getattr(result, "symmetry_mass", None)
+    if mass_of is None:
+        return None
+    mass = np.asarray(mass_of(), dtype=np.float64)
+    vmap = np.asarray(result.symmetry_map(), dtype=np.int64)
+    shapes = _shape_module()
+    cleaned, vertex_map = shapes.clean(shape)
+    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(shapes.surface_area(cleaned)), cleaned.faces)
+    scored = (np.asarray(sym) >= 0) & (vmap >= 0)
+    err = evaluate.map_errors(vertex_map[vmap[scored]], vertex_map[np.asarray(sym)[scored]], graph)
+    which = np.minimum((mass[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
+    return {
+        "bins": MASS_BINS,
+        "count": np.bincount(which, minlength=MASS_BINS).tolist(),
+        "within_0.05": np.bincount(which, weights=err < 0.05, minlength=MASS_BINS).astype(int).tolist(),
+        "within_0.10": np.bincount(which, weights=err < 0.10, minlength=MASS_BINS).astype(int).tolist(),
+    }
+
+
 def _sample_vertices(result) -> tuple[np.ndarray, np.ndarray]:
     """Input-mesh vertex of every source and target sample (either attribute name)."""
     out = []
@@ -271,6 +298,7 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     vmap = np.asarray(result.symmetry_map())
     row["global_found"] = bool((vmap >= 0).any())
     row["map"] = _map_row(evaluate.score_map(vmap, shape, sym))
+    row["reliability"] = reliability(result, shape, sym) if row["global_found"] else None
     row["decision"] = decision(info)
     row["bp_iterations"] = field(info, "bp", "iterations")
     row["bp_converged"] = field(info, "bp", "converged")

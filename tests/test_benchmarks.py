@@ -4,6 +4,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import trimesh
 
@@ -101,3 +102,39 @@ def test_score_table_against_a_reflection(tmp_path):
     row = json.loads(out.with_suffix(".json").read_text())[0]
     assert row["shape"] == "bent" and row["mirror_residual"] < 1e-6
     assert row["bp"]["mirror_hit"] >= 0.9 and row["map"]["within_0.10"] >= 0.9
+
+
+def _row(cls, count, within, shape="s"):
+    return {"shape": shape, "class": cls, "reliability": {"count": count, "within_0.05": within}}
+
+
+def test_calibration_fit_is_the_weighted_isotonic_regression_by_hand():
+    import calibration
+
+    # 4 mass bins; shares 0.5, 0.2, 0.9, 1.0 with counts 10, 30, 10, 10: the first two
+    # violate monotony and pool to (5 + 6) / 40 = 0.275; the empty bin takes a neighbour's.
+    rows = [_row("a", [10, 30, 0, 10], [5, 6, 0, 9]), _row("b", [0, 0, 10, 0], [0, 0, 10, 0])]
+    fitted = calibration.fit(rows)
+    assert fitted == pytest.approx([0.275, 0.275, 0.95, 0.95])
+
+
+def test_calibration_ece_by_hand():
+    import calibration
+
+    # two bins of confidence 0.25 and 0.95 holding 3 and 1 items, 1 and 1 right:
+    # ECE = 3/4 |1/3 - 0.25| + 1/4 |1 - 0.95|
+    ece = calibration.ece(np.array([0.25, 0.95]), np.array([3.0, 1.0]), np.array([1.0, 1.0]))
+    assert ece == pytest.approx(0.75 * (1 / 3 - 0.25) + 0.25 * 0.05)
+    # a perfectly calibrated confidence
+    assert calibration.ece(np.array([0.5]), np.array([4.0]), np.array([2.0])) == pytest.approx(0.0)
+
+
+def test_calibration_leaves_each_class_out():
+    import calibration
+
+    # class a: every vertex right, class b: every vertex wrong; held out, each class gets
+    # the other's fit, so the calibrated ECE is 1 for both.
+    rows = [_row("a", [0, 5], [0, 5], "a0"), _row("b", [0, 5], [0, 0], "b0")]
+    per_class, conf, count, within = calibration.leave_one_class_out(rows)
+    assert [c["ece_calibrated"] for c in per_class] == pytest.approx([1.0, 1.0])
+    assert per_class[0]["global"] == [("a0", pytest.approx(0.0), pytest.approx(1.0))]

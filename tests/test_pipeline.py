@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 import intrinsym
-from intrinsym import bp, evaluate, pipeline, vertex_maps
+from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
 from intrinsym.params import MAP_MARGIN
 from intrinsym.shape import Shape
 from intrinsym.support import Support
@@ -90,6 +90,10 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     assert np.array_equal(intrinsym.Result.load(out).zoomout_map, r.zoomout_map)
     conf = np.load(out / "symmetry_mass.npy")
     assert conf.shape == (len(spot.vertices),) and conf.dtype == np.float32 and 0 <= conf.min() <= conf.max() <= 1
+    calibrated = np.load(out / "symmetry_confidence.npy")
+    assert calibrated.dtype == np.float32 and calibrated.shape == conf.shape
+    assert np.array_equal(calibrated, np.where(r.symmetry_map() >= 0, confidence.calibrated(conf), 0))
+    assert r.global_confidence() == pytest.approx(float(calibrated.mean()))
     # the global confidence is the samples' mean confidence
     per_sample = conf[r.source_point_vertex]
     assert abs(per_sample.mean() - chosen.mass) < 0.1

@@ -224,6 +224,8 @@ def test_viewer_in_a_headless_browser(tmp_path):
         assert (np.abs(g[..., 0] - g[..., 2]) > 0.15).sum() < 10
         boxes.nth(0).check()
         assert "partial" in page.locator("#label-parts").inner_text()
+        # Without symmetry_confidence.npy the page offers no confidence colouring.
+        assert page.locator("#by-confidence").is_hidden()
         # The run panel: the groups shown, the rest folded.
         rows = {"sizes": "|Ps|", "seconds": "total", "bp": "converged", "parameters": "trivial_weight"}
         for group, row in rows.items():
@@ -233,6 +235,30 @@ def test_viewer_in_a_headless_browser(tmp_path):
         page.locator("#run-more summary").click()
         assert "spin_bins" in page.locator("#run").inner_text()
         assert page.locator("#run").inner_text().count("detect") == 1
+        assert errors == []
+    finally:
+        browser.close()
+        pw.stop()
+
+
+def test_viewer_colours_the_symmetry_view_by_confidence(tmp_path):
+    out, v = sphere_result(tmp_path)
+    _symmetries(out, v)
+    conf = np.clip(v[:, 2], 0, 1).astype(np.float32)  # 0 on the lower half, up to 1 at the top
+    np.save(out / "symmetry_confidence.npy", conf)
+    data = _page_data(viewer.write(out))
+    assert np.array_equal(unpack(data["confidence"], np.float32), conf)
+    assert data["global_confidence"] == pytest.approx(float(conf.mean()))
+    pw, browser, page, errors = _start_page(out / "viewer.html")
+    try:
+        page.locator("#by-confidence input").check()
+        assert "Confidence of the symmetry map" in page.locator("#label-parts").inner_text()
+        colors = np.array(page.evaluate("Array.from(window.intrinsym.colors.parts)")).reshape(-1, 3)
+        # the heat map's ends: blue at 0, red at 1
+        assert np.allclose(colors[np.argmin(conf)], [0.125, 0.25, 0.816], atol=1e-6)
+        assert np.allclose(colors[np.argmax(conf)], [0.816, 0.063, 0.063], atol=1e-2)
+        page.locator("#by-confidence input").uncheck()
+        assert "global" in page.locator("#label-parts").inner_text()
         assert errors == []
     finally:
         browser.close()

@@ -269,7 +269,8 @@ def _summary(result: Result, out: Path) -> dict:
         "sizes": dataclasses.asdict(info.sizes),
         "seconds": {k: round(v, 3) for k, v in info.seconds.items()},
         "bp": {k: getattr(info.bp, k) for k in ("backend", "iterations", "converged", "max_change")},
-        "files": ["result.npz", "run.json"] + (["symmetries.json", "symmetry_map.npy"] if result.extraction else []),
+        "files": [f for f in Result.FILES if (out / f).is_file()],
+        "global_confidence": result.global_confidence() if result.extraction else None,
     }
 
 
@@ -285,6 +286,11 @@ def _print_summary(s: dict) -> None:
     )
     if "symmetries" in s:
         print(f"symmetries: {s['symmetries']} found (symmetries.json)")
+    if s.get("global_confidence") is not None:
+        print(
+            f"global symmetry: {s['global_confidence']:.2f} of the vertices expected within 0.05 of their true image "
+            "(symmetry_confidence.npy)"
+        )
     print(f"wrote {', '.join(s['files'])} to {s['out']}")
     if s.get("figures"):
         print(f"figures: {', '.join(s['figures'])} in {s['out']}/figures")

@@ -19,7 +19,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
-from .confidence import map_mass
+from .confidence import calibrated, map_mass
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, write_set
@@ -93,6 +93,7 @@ class Result:
         "symmetries.json",
         "symmetry_map.npy",
         "symmetry_mass.npy",
+        "symmetry_confidence.npy",
     )
     ARRAYS: ClassVar[tuple[str, ...]] = (
         "source_points",
@@ -183,6 +184,22 @@ class Result:
             self.params.mass_radius,
         )
 
+    def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
+        """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image
+        under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
+        (``symmetry_confidence.npy``): :meth:`symmetry_mass` (or ``mass``) through
+        :func:`intrinsym.confidence.calibrated`; 0 where the map gives no image."""
+        mass = self.symmetry_mass() if mass is None else mass
+        return np.where(self.symmetry_map() >= 0, calibrated(mass), 0.0).astype(np.float32)
+
+    def global_confidence(self) -> float | None:
+        """The expected share of vertices whose image lies within 0.05 sqrt(area) of the
+        true one: the mean of :meth:`symmetry_confidence` over the input vertices; None
+        without a global symmetry."""
+        if self.global_symmetry is None:
+            return None
+        return float(np.mean(self.symmetry_confidence()))
+
     def run_json(self) -> dict[str, Any]:
         """``run.json``'s content: the parameters and :class:`RunInfo`."""
         return {"params": dataclasses.asdict(self.params), **self.info.to_dict()}
@@ -221,7 +238,9 @@ class Result:
             writers["symmetries.json"] = write_json(listed)
             writers["symmetry_map.npy"] = lambda path: np.save(path, vmap)
             mass = self.symmetry_mass()
+            conf = self.symmetry_confidence(mass)
             writers["symmetry_mass.npy"] = lambda path: np.save(path, mass)
+            writers["symmetry_confidence.npy"] = lambda path: np.save(path, conf)
         write_set(out, writers, owned=self.FILES)
         return out
 

@@ -267,6 +267,7 @@ def payload(
     scores: dict | None,
     up: str = "y",
     k: int = 12,
+    confidence: np.ndarray | None = None,
 ) -> dict:
     """Everything the page needs, JSON-ready.
 
@@ -284,6 +285,8 @@ def payload(
         World axis shown upwards at first.
     k : int
         Target samples per vertex in the Eq. 9 interpolation.
+    confidence : (N,) float array or None
+        ``symmetry_confidence.npy``: the page can colour the symmetry view by it.
 
     Returns
     -------
@@ -316,6 +319,9 @@ def payload(
         "run": run_panel(result, len(shape.vertices)),
         "scores": scores,
     }
+    if self_match and confidence is not None and len(confidence) == len(shape.vertices) and confidence.any():
+        data["confidence"] = pack(np.asarray(confidence, dtype=np.float32))
+        data["global_confidence"] = float(np.mean(confidence))
     if not self_match:
         data["symmetries_note"] = "not shown for two-shape matching"
     return data
@@ -349,8 +355,8 @@ def write(
     Parameters
     ----------
     out_dir : path
-        Directory written by ``Result.save`` (``symmetries.json`` and ``scores.json``
-        are used when present).
+        Directory written by ``Result.save`` (``symmetries.json``, ``scores.json`` and
+        ``symmetry_confidence.npy`` are used when present).
     html_path : path, optional
         Default ``out_dir/viewer.html``.
     mesh_path : path, optional
@@ -369,7 +375,12 @@ def write(
         scores = json.loads(scores_path.read_text()) if scores_path.is_file() else None
     except (OSError, ValueError) as err:
         raise InputError(f"{scores_path}: cannot read it ({err}); run intrinsym evaluate again") from None
-    html = render_html(payload(result, shape, viz.load_symmetries(out), scores, up))
+    conf_path = out / "symmetry_confidence.npy"
+    try:
+        conf = np.load(conf_path) if conf_path.is_file() else None
+    except (OSError, ValueError) as err:
+        raise InputError(f"{conf_path}: cannot read it ({err})") from None
+    html = render_html(payload(result, shape, viz.load_symmetries(out), scores, up, confidence=conf))
     path = Path(html_path) if html_path is not None else out / "viewer.html"
 
     def write_html(f: IO[str]) -> None:

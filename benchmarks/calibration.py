@@ -1,0 +1,167 @@
+"""Calibrate the per-vertex marginal mass into a confidence, and check it class by class.
+
+Reads the per-shape rows that ``benchmarks/tosca.py`` caches (``--cache DIR``): each row
+with a global map holds a histogram of the symmetry map's per-vertex marginal mass
+(``symmetry_mass``, :data:`tosca.MASS_BINS` equal-width bins) with, per bin, how many
+vertices map within 0.05 of their true image. From these it
+
+1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
+   0.05" on the bin centres, weighted by the vertex counts; these values are
+   :data:`intrinsym.confidence.CALIBRATION` (the script says whether the package's copy
+   is the fit, and prints the fit to paste when it is not);
+2. checks it leaving one class out: for each class, the fit on the other classes is
+   applied to that class's vertices; the table gives the expected calibration error (10
+   equal-width confidence bins) of the raw mass and of the calibrated confidence, and the
+   predicted against the measured share of vertices within 0.05 (the global confidence);
+3. prints the pooled reliability table of the held-out confidences.
+
+Every vertex of a mass bin takes the confidence of the bin's centre (the histogram holds
+no finer mass). Command::
+
+    python benchmarks/calibration.py --cache DIR [--tag TAG] [-o TABLE.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import isotonic_regression
+
+from intrinsym import confidence
+
+#: Equal-width confidence bins of the expected calibration error.
+ECE_BINS = 10
+
+
+def load_rows(cache: Path, tag: str | None) -> list[dict]:
+    """The cached rows with a reliability histogram (and the given tag)."""
+    rows = []
+    for path in sorted(cache.glob("*.json")):
+        row = json.loads(path.read_text())
+        if row.get("reliability") and (tag is None or row.get("tag") == tag):
+            rows.append(row)
+    return rows
+
+
+def histogram(rows: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """Summed vertex counts and counts within 0.05 per mass bin."""
+    count = np.sum([r["reliability"]["count"] for r in rows], axis=0).astype(np.float64)
+    within = np.sum([r["reliability"]["within_0.05"] for r in rows], axis=0).astype(np.float64)
+    return count, within
+
+
+def centres(n_bins: int) -> np.ndarray:
+    return (np.arange(n_bins) + 0.5) / n_bins
+
+
+def fit(rows: list[dict]) -> np.ndarray:
+    """Isotonic fit of the share within 0.05 per mass bin (empty bins take their neighbours')."""
+    count, within = histogram(rows)
+    has = count > 0
+    values = np.empty(len(count))
+    values[has] = isotonic_regression(within[has] / count[has], weights=count[has]).x
+    return np.interp(centres(len(count)), centres(len(count))[has], values[has])
+
+
+def ece(conf: np.ndarray, count: np.ndarray, within: np.ndarray) -> float:
+    """Expected calibration error of a per-bin confidence (10 equal-width bins)."""
+    which = np.minimum((conf * ECE_BINS).astype(np.int64), ECE_BINS - 1)
+    total, err = count.sum(), 0.0
+    for b in range(ECE_BINS):
+        inside = which == b
+        n = count[inside].sum()
+        if n:
+            err += n / total * abs(within[inside].sum() / n - (conf[inside] * count[inside]).sum() / n)
+    return err
+
+
+def leave_one_class_out(rows: list[dict]) -> tuple[list[dict], np.ndarray, np.ndarray, np.ndarray]:
+    """Per class: ECE of the raw mass and of the held-out calibration, and the global
+    confidence against the measured share; plus the pooled held-out bins."""
+    classes = sorted({r["class"] for r in rows})
+    out, pooled_conf, pooled_count, pooled_within = [], [], [], []
+    for cls in classes:
+        test = [r for r in rows if r["class"] == cls]
+        train = [r for r in rows if r["class"] != cls]
+        calib = fit(train)
+        count, within = histogram(test)
+        mass = centres(len(count))
+        shapes = []
+        for r in test:
+            c = np.asarray(r["reliability"]["count"], dtype=np.float64)
+            w = np.asarray(r["reliability"]["within_0.05"], dtype=np.float64)
+            shapes.append((r["shape"], float((calib * c).sum() / c.sum()), float(w.sum() / c.sum())))
+        out.append(
+            {
+                "class": cls,
+                "shapes": len(test),
+                "ece_mass": ece(mass, count, within),
+                "ece_calibrated": ece(calib, count, within),
+                "global": shapes,
+            }
+        )
+        pooled_conf.append(calib)
+        pooled_count.append(count)
+        pooled_within.append(within)
+    return out, np.concatenate(pooled_conf), np.concatenate(pooled_count), np.concatenate(pooled_within)
+
+
+def markdown(rows: list[dict]) -> str:
+    per_class, conf, count, within = leave_one_class_out(rows)
+    lines = [
+        "| held-out class | shapes | ECE of the mass | ECE calibrated | global confidence − measured, worst |",
+        "|---|---|---|---|---|",
+    ]
+    for c in per_class:
+        worst = max(c["global"], key=lambda s: abs(s[1] - s[2]))
+        lines.append(
+            f"| {c['class']} | {c['shapes']} | {c['ece_mass']:.3f} | {c['ece_calibrated']:.3f} | "
+            f"{worst[1] - worst[2]:+.3f} ({worst[0]}: {worst[1]:.3f} vs {worst[2]:.3f}) |"
+        )
+    mass = np.tile(centres(len(rows[0]["reliability"]["count"])), len(per_class))
+    lines.append(
+        f"| **all, held out** | {len(rows)} | {ece(mass, count, within):.3f} | {ece(conf, count, within):.3f} | "
+        f"mean abs {np.mean([abs(s[1] - s[2]) for c in per_class for s in c['global']]):.3f} |"
+    )
+    table = ["| confidence bin | share of vertices | mean confidence | within 0.05 |", "|---|---|---|---|"]
+    which = np.minimum((conf * ECE_BINS).astype(np.int64), ECE_BINS - 1)
+    for b in range(ECE_BINS):
+        inside = which == b
+        n = count[inside].sum()
+        if n:
+            table.append(
+                f"| {b / ECE_BINS:.1f}-{(b + 1) / ECE_BINS:.1f} | {n / count.sum():.3f} | "
+                f"{(conf[inside] * count[inside]).sum() / n:.3f} | {within[inside].sum() / n:.3f} |"
+            )
+    return "\n".join(lines) + "\n\nPooled held-out reliability:\n\n" + "\n".join(table) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cache", type=Path, required=True, help="benchmarks/tosca.py's cache folder")
+    parser.add_argument("--tag", help="only rows with this tag")
+    parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
+    args = parser.parse_args(argv)
+    rows = load_rows(args.cache, args.tag)
+    if len({r["class"] for r in rows}) < 2:
+        print(f"calibration.py: need rows of at least two classes with a global map in {args.cache}")
+        return 1
+    text = markdown(rows)
+    values = fit(rows)
+    same = np.allclose(values, confidence.CALIBRATION, atol=5e-4)
+    text += (
+        f"\nFit on all {len(rows)} shapes ({'equal to' if same else 'differs from'} "
+        f"intrinsym.confidence.CALIBRATION):\n\nCALIBRATION = ({', '.join(f'{v:.3f}' for v in values)})\n"
+    )
+    print(text)
+    if args.out:
+        args.out.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,24 @@
+"""The calibrated per-vertex confidence: its table and interpolation."""
+
+import numpy as np
+import pytest
+
+from intrinsym import confidence
+
+
+def test_calibration_table_is_a_non_decreasing_probability():
+    table = np.asarray(confidence.CALIBRATION)
+    assert table.shape == (20,)
+    assert 0 <= table.min() and table.max() <= 1
+    assert np.all(np.diff(table) >= 0)
+
+
+def test_calibrated_interpolates_between_bin_centres():
+    table = np.asarray(confidence.CALIBRATION)
+    centres = (np.arange(20) + 0.5) / 20
+    assert confidence.calibrated(centres) == pytest.approx(table, abs=1e-6)
+    mid = confidence.calibrated(np.array([0.05]))[0]  # halfway between the first two centres
+    assert mid == pytest.approx((table[0] + table[1]) / 2, abs=1e-6)
+    ends = confidence.calibrated(np.array([0.0, 1.0]))
+    assert ends == pytest.approx([table[0], table[-1]], abs=1e-6)
+    assert confidence.calibrated(np.zeros(3)).dtype == np.float32
