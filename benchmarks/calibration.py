@@ -1,9 +1,11 @@
 """Calibrate the per-vertex marginal mass into a confidence, and check it class by class.
 
 Reads the per-shape rows that ``benchmarks/tosca.py`` caches (``--cache DIR``): each row
-with a global map holds a histogram of the symmetry map's per-vertex marginal mass
-(``symmetry_mass``, :data:`tosca.MASS_BINS` equal-width bins) with, per bin, how many
-vertices map within 0.05 of their true image. From these it
+with a global map holds histograms of the symmetry map's per-vertex score
+(``symmetry_score``: the marginal mass weighed by how far two global maps agree) and of
+its marginal mass alone (``symmetry_mass``), :data:`tosca.MASS_BINS` equal-width bins,
+with, per bin, how many vertices map within 0.05 of their true image. From the
+``--feature`` chosen (default ``score``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
    0.05" on the bin centres, weighted by the vertex counts; these values are
@@ -18,7 +20,7 @@ vertices map within 0.05 of their true image. From these it
 Every vertex of a mass bin takes the confidence of the bin's centre (the histogram holds
 no finer mass). Command::
 
-    python benchmarks/calibration.py --cache DIR [--tag TAG] [-o TABLE.md]
+    python benchmarks/calibration.py --cache DIR [--tag TAG] [--feature score|mass] [-o TABLE.md]
 """
 
 from __future__ import annotations
@@ -37,13 +39,15 @@ from intrinsym import confidence
 ECE_BINS = 10
 
 
-def load_rows(cache: Path, tag: str | None) -> list[dict]:
-    """The cached rows with a reliability histogram (and the given tag)."""
+def load_rows(cache: Path, tag: str | None, feature: str = "score") -> list[dict]:
+    """The cached rows with a reliability histogram of ``feature`` (and the given tag),
+    that histogram as the row's ``reliability``."""
     rows = []
     for path in sorted(cache.glob("*.json")):
         row = json.loads(path.read_text())
-        if row.get("reliability") and (tag is None or row.get("tag") == tag):
-            rows.append(row)
+        histogram = (row.get("reliability") or {}).get(feature)
+        if histogram and (tag is None or row.get("tag") == tag):
+            rows.append({**row, "reliability": histogram})
     return rows
 
 
@@ -113,7 +117,7 @@ def leave_one_class_out(rows: list[dict]) -> tuple[list[dict], np.ndarray, np.nd
 def markdown(rows: list[dict]) -> str:
     per_class, conf, count, within = leave_one_class_out(rows)
     lines = [
-        "| held-out class | shapes | ECE of the mass | ECE calibrated | global confidence − measured, worst |",
+        "| held-out class | shapes | ECE uncalibrated | ECE calibrated | global confidence − measured, worst |",
         "|---|---|---|---|---|",
     ]
     for c in per_class:
@@ -144,9 +148,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cache", type=Path, required=True, help="benchmarks/tosca.py's cache folder")
     parser.add_argument("--tag", help="only rows with this tag")
+    parser.add_argument("--feature", choices=("score", "mass"), default="score", help="what is calibrated")
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
     args = parser.parse_args(argv)
-    rows = load_rows(args.cache, args.tag)
+    rows = load_rows(args.cache, args.tag, args.feature)
     if len({r["class"] for r in rows}) < 2:
         print(f"calibration.py: need rows of at least two classes with a global map in {args.cache}")
         return 1

@@ -78,7 +78,7 @@ REFLECTION_CLASS = "reflection"
 #: Marginal scores shown in the table (``score_marginals`` also gives breadth, kept in JSON).
 MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3
 
 
 # --------------------------------------------------------------------------- shapes
@@ -180,31 +180,40 @@ def decision(info) -> dict:
     }
 
 
-#: Equal-width bins of the per-vertex marginal mass in the reliability histogram.
+#: Equal-width bins of the per-vertex score and mass in the reliability histograms.
 MASS_BINS = 20
 
 
 def reliability(result, shape, sym) -> dict | None:
-    """Per bin of the symmetry map's per-vertex marginal mass (``symmetry_mass``): how many
-    vertices fall in it and how many of them map within 0.05 / 0.10 of the true image
-    (graph geodesics, units of sqrt(area)); None on code without the mass."""
-    mass_of = getattr(result, "symmetry_mass", None)
-    if mass_of is None:
+    """Per bin of the symmetry map's per-vertex score (``symmetry_score``, the uncalibrated
+    confidence) and of its marginal mass (``symmetry_mass``): how many vertices fall in it
+    and how many of them map within 0.05 / 0.10 of the true image (graph geodesics, units
+    of sqrt(area)); keyed ``score`` and ``mass``, each None on code without it."""
+    features = {}
+    for key in ("score", "mass"):
+        of = getattr(result, f"symmetry_{key}", None)
+        features[key] = None if of is None else np.asarray(of(), dtype=np.float64)
+    if features["mass"] is None:
         return None
-    mass = np.asarray(mass_of(), dtype=np.float64)
     vmap = np.asarray(result.symmetry_map(), dtype=np.int64)
     shapes = _shape_module()
     cleaned, vertex_map = shapes.clean(shape)
     graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(shapes.surface_area(cleaned)), cleaned.faces)
     scored = (np.asarray(sym) >= 0) & (vmap >= 0)
     err = evaluate.map_errors(vertex_map[vmap[scored]], vertex_map[np.asarray(sym)[scored]], graph)
-    which = np.minimum((mass[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
-    return {
-        "bins": MASS_BINS,
-        "count": np.bincount(which, minlength=MASS_BINS).tolist(),
-        "within_0.05": np.bincount(which, weights=err < 0.05, minlength=MASS_BINS).astype(int).tolist(),
-        "within_0.10": np.bincount(which, weights=err < 0.10, minlength=MASS_BINS).astype(int).tolist(),
-    }
+    out: dict = {}
+    for key, value in features.items():
+        if value is None:
+            out[key] = None
+            continue
+        which = np.minimum((value[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
+        out[key] = {
+            "bins": MASS_BINS,
+            "count": np.bincount(which, minlength=MASS_BINS).tolist(),
+            "within_0.05": np.bincount(which, weights=err < 0.05, minlength=MASS_BINS).astype(int).tolist(),
+            "within_0.10": np.bincount(which, weights=err < 0.10, minlength=MASS_BINS).astype(int).tolist(),
+        }
+    return out
 
 
 def _sample_vertices(result) -> tuple[np.ndarray, np.ndarray]:

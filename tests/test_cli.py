@@ -28,6 +28,9 @@ def test_detect_example_writes_result(tmp_path):
     assert (out / "result.npz").is_file() and (out / "run.json").is_file()
     with np.load(out / "result.npz") as z:
         assert z["marginals"].shape == (30, 300)
+    # every file written is listed; the global confidence is the mean of the one written
+    assert sorted(summary["files"]) == sorted(p.name for p in out.iterdir() if p.is_file())
+    assert summary["global_confidence"] == pytest.approx(np.load(out / "symmetry_confidence.npy").mean())
 
 
 def test_detect_trivial_weight(tmp_path):

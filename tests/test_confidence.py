@@ -22,3 +22,17 @@ def test_calibrated_interpolates_between_bin_centres():
     ends = confidence.calibrated(np.array([0.0, 1.0]))
     assert ends == pytest.approx([table[0], table[-1]], abs=1e-6)
     assert confidence.calibrated(np.zeros(3)).dtype == np.float32
+
+
+def test_disagreement_by_hand():
+    vertices = np.array([[0.0, 0, 0], [3, 0, 0], [0, 4, 0]])
+    apart = confidence.disagreement(vertices, np.array([1, 2, 0, -1]), np.array([2, 2, -1, 0]), scale=2.0)
+    assert apart[:2] == pytest.approx([2.5, 0.0])  # |(3,0,0) - (0,4,0)| / 2
+    assert np.isnan(apart[2:]).all()  # no image under one of the maps
+
+
+def test_score_weighs_the_mass_by_agreement():
+    r = confidence.DISAGREEMENT_RANGE
+    mass = np.array([0.8, 0.8, 0.8, 0.8, 0.5])
+    apart = np.array([0.0, r / 4, r, 2 * r, np.nan])
+    assert confidence.score(mass, apart) == pytest.approx([0.8, 0.6, 0.0, 0.0, 0.5])

@@ -10,7 +10,7 @@ import trimesh
 import intrinsym
 from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
 from intrinsym.params import MAP_MARGIN
-from intrinsym.shape import Shape
+from intrinsym.shape import Shape, surface_area
 from intrinsym.support import Support
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
@@ -92,7 +92,11 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     assert conf.shape == (len(spot.vertices),) and conf.dtype == np.float32 and 0 <= conf.min() <= conf.max() <= 1
     calibrated = np.load(out / "symmetry_confidence.npy")
     assert calibrated.dtype == np.float32 and calibrated.shape == conf.shape
-    assert np.array_equal(calibrated, np.where(r.symmetry_map() >= 0, confidence.calibrated(conf), 0))
+    apart = confidence.disagreement(
+        spot.vertices, r.symmetry_map(), r.extraction_map(), np.sqrt(surface_area(spot))
+    )  # the chosen map against the extraction's own
+    expected = confidence.calibrated(confidence.score(conf, apart))
+    assert np.allclose(calibrated, np.where(r.symmetry_map() >= 0, expected, 0), atol=1e-5)
     assert r.global_confidence() == pytest.approx(float(calibrated.mean()))
     # the global confidence is the samples' mean confidence
     per_sample = conf[r.source_point_vertex]

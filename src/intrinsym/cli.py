@@ -261,6 +261,14 @@ def _overrides(args: argparse.Namespace) -> dict:
     return {f.name: getattr(args, f.name) for f in params.describe() if getattr(args, f.name, None) is not None}
 
 
+def _global_confidence(result: Result, out: Path) -> float | None:
+    """The mean of the symmetry_confidence.npy just written, None without a global symmetry."""
+    path = out / "symmetry_confidence.npy"
+    if result.global_symmetry is None or not path.is_file():
+        return None
+    return float(np.load(path).mean())
+
+
 def _summary(result: Result, out: Path) -> dict:
     info = result.info
     return {
@@ -270,7 +278,7 @@ def _summary(result: Result, out: Path) -> dict:
         "seconds": {k: round(v, 3) for k, v in info.seconds.items()},
         "bp": {k: getattr(info.bp, k) for k in ("backend", "iterations", "converged", "max_change")},
         "files": [f for f in Result.FILES if (out / f).is_file()],
-        "global_confidence": result.global_confidence() if result.extraction else None,
+        "global_confidence": _global_confidence(result, out),
     }
 
 

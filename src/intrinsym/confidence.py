@@ -10,8 +10,9 @@ value of the source sample whose Voronoi cell holds it (:func:`vertex_confidence
 :func:`map_mass`: ``symmetry_mass.npy``).
 
 The mass is not a calibrated probability: BP's marginals are sharper than the map's
-errors on posed shapes. :func:`calibrated` maps it through a non-decreasing table fitted
-on posed shapes to the probability that a vertex's image lies within 0.05 of the true one
+errors on posed shapes. :func:`score` weighs it by how far two global maps agree on each
+image, and :func:`calibrated` maps that through a non-decreasing table fitted on posed
+shapes to the probability that a vertex's image lies within 0.05 of the true one
 (``symmetry_confidence.npy``); docs/results.md checks that table on held-out classes with
 :func:`calibration` (reliability table and expected calibration error).
 """
@@ -30,31 +31,73 @@ __all__ = [
     "Bin",
     "calibrated",
     "calibration",
+    "disagreement",
     "kept_mass",
     "map_mass",
     "mass_within",
     "sample_images",
+    "score",
     "vertex_confidence",
 ]
 
 
 #: The calibration of :func:`calibrated`: the share of vertices whose image lies within
-#: 0.05 sqrt(area) of the true one, per 1/20-wide bin of the marginal mass (value at the
+#: 0.05 sqrt(area) of the true one, per 1/20-wide bin of :func:`score` (value at the
 #: bin's centre), fitted (isotonic) over the TOSCA poses, KIDS and the mirror-posed scans
 #: by ``benchmarks/calibration.py``; docs/results.md checks it one held-out class at a time.
 CALIBRATION = (
-    0.290, 0.599, 0.648, 0.648, 0.648, 0.648, 0.648, 0.648, 0.648, 0.648,
-    0.648, 0.648, 0.709, 0.749, 0.749, 0.749, 0.749, 0.749, 0.749, 0.870,
+    0.524, 0.524, 0.524, 0.534, 0.548, 0.548, 0.548, 0.573, 0.635, 0.707,
+    0.780, 0.875, 0.897, 0.905, 0.905, 0.939, 0.943, 0.971, 0.981, 0.996,
 )  # fmt: skip
 
 
+#: Two global maps (the chosen one and the extraction's) placing a vertex's image this far
+#: apart (units of sqrt(area)) leave it no score: one of them is off by half of it at least.
+DISAGREEMENT_RANGE = 0.10
+
+
+def disagreement(vertices: np.ndarray, first: np.ndarray, second: np.ndarray, scale: float) -> np.ndarray:
+    """Straight-line distance between each vertex's images under two maps.
+
+    Parameters
+    ----------
+    vertices : (M, 3) float array
+        Positions of the image vertices.
+    first, second : (N,) int arrays
+        Image of every vertex under each map, -1 for none.
+    scale : float
+        Length unit of the result (sqrt(area) of the shape).
+
+    Returns
+    -------
+    (N,) float64
+        ``|vertices[first] - vertices[second]| / scale``; nan where either map has no image.
+    """
+    a, b = np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64)
+    v = np.asarray(vertices, dtype=np.float64)
+    d = np.linalg.norm(v[np.maximum(a, 0)] - v[np.maximum(b, 0)], axis=1) / scale
+    return np.where((a >= 0) & (b >= 0), d, np.nan)
+
+
+def score(mass: np.ndarray, apart: np.ndarray) -> np.ndarray:
+    """Per-vertex score in [0, 1] that :func:`calibrated` turns into a probability: the
+    marginal mass (:func:`map_mass`, how far the model supports the image) times
+    ``1 - apart / DISAGREEMENT_RANGE`` clipped to [0, 1] (how far two maps agree on it;
+    ``apart``: :func:`disagreement`, nan where the second map has no image: the mass
+    alone)."""
+    apart = np.nan_to_num(np.asarray(apart, dtype=np.float64), nan=0.0)
+    agree = np.clip(1.0 - apart / DISAGREEMENT_RANGE, 0.0, 1.0)
+    return np.asarray(mass, dtype=np.float64) * agree
+
+
 def calibrated(mass: np.ndarray) -> np.ndarray:
-    """Per-vertex confidence from the marginal mass (:func:`map_mass`): the probability
-    that the vertex's image lies within 0.05 sqrt(area) of its true image.
+    """Per-vertex confidence from :func:`score`: the probability that the vertex's image
+    lies within 0.05 sqrt(area) of its true image.
 
     Parameters
     ----------
     mass : (N,) float array in [0, 1]
+        :func:`score` of every vertex.
 
     Returns
     -------

@@ -19,7 +19,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
-from .confidence import calibrated, map_mass
+from .confidence import calibrated, disagreement, map_mass, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, write_set
@@ -156,6 +156,15 @@ class Result:
             raise ValueError("the result has no extraction")
         if self.zoomout_map is not None:
             return np.asarray(self.zoomout_map, dtype=np.int64)
+        return self.extraction_map()
+
+    def extraction_map(self) -> np.ndarray:
+        """(N_in,) int64: the extraction's own vertex map of the global symmetry
+        (:func:`intrinsym.vertex_maps.fitted_vertex_map`), -1 everywhere when there is
+        none; the symmetry map when the run chose no other. Needs ``support`` and
+        ``extraction``."""
+        if self.support is None or self.extraction is None:
+            raise ValueError("the result has no extraction")
         sym = self.extraction.global_symmetry
         if sym is None:
             return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
@@ -184,13 +193,23 @@ class Result:
             self.params.mass_radius,
         )
 
+    def symmetry_score(self, mass: np.ndarray | None = None) -> np.ndarray:
+        """(N_in,) float64 in [0, 1]: per input vertex, :meth:`symmetry_mass` (or
+        ``mass``) weighed by how far the symmetry map and the extraction's own map agree
+        on its image (:func:`intrinsym.confidence.score`); uncalibrated."""
+        mass = self.symmetry_mass() if mass is None else mass
+        images = None if self.support is None else self.support.target_mesh_vertices
+        if images is None or self.zoomout_map is None:
+            return np.asarray(mass, dtype=np.float64)
+        apart = disagreement(images, self.symmetry_map(), self.extraction_map(), self.info.resolved.scale)
+        return score(mass, apart)
+
     def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image
         under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
-        (``symmetry_confidence.npy``): :meth:`symmetry_mass` (or ``mass``) through
+        (``symmetry_confidence.npy``): :meth:`symmetry_score` through
         :func:`intrinsym.confidence.calibrated`; 0 where the map gives no image."""
-        mass = self.symmetry_mass() if mass is None else mass
-        return np.where(self.symmetry_map() >= 0, calibrated(mass), 0.0).astype(np.float32)
+        return np.where(self.symmetry_map() >= 0, calibrated(self.symmetry_score(mass)), 0.0).astype(np.float32)
 
     def global_confidence(self) -> float | None:
         """The expected share of vertices whose image lies within 0.05 sqrt(area) of the
