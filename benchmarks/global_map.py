@@ -49,7 +49,6 @@ from intrinsym.pipeline import _min_vertices, extract_result
 from intrinsym.shape import Shape, clean, surface_area
 from intrinsym.support import SourceGraph
 from intrinsym.surface import prepare, sample
-from intrinsym.vertex_maps import fitted_vertex_map
 from tosca import cases
 
 CANDIDATES = ("extraction", "zoomout", "spectral")
@@ -180,6 +179,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
         result = intrinsym.detect(mesh, params)
     p = result.params
     extraction = extract_result(result)
+    result = dataclasses.replace(result, extraction=extraction)
     n_s = len(result.marginals)
     targets = result.support.targets
     graph = SourceGraph.from_edges(result.edges, result.support.edge_length, n_s)
@@ -199,17 +199,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     row["coverage"] = len(sym.source) / n_s
     spectrum = unary.spectrum(surf, p.eigenpairs)
     source_vertex = result.source_point_vertex
-    maps = {
-        "extraction": fitted_vertex_map(
-            sym,
-            result.support,
-            result.edges,
-            result.source_points,
-            result.target_points,
-            result.target_point_vertex,
-            p.extraction(False),
-        )
-    }
+    maps = {"extraction": result.extraction_map()}
     maps["zoomout"] = zoomout_map(surf, ps, pt, sym, spectrum[1], p)
 
     def images(vmap: np.ndarray) -> np.ndarray:

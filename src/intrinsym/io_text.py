@@ -60,6 +60,14 @@ def _content_lines(text: str) -> tuple[list[int], list[str]]:
     return numbers, lines
 
 
+def _data_lines(path: str, label: str) -> tuple[list[int], list[str]]:
+    """:func:`_content_lines` of a text file; an :class:`InputError` when it has none."""
+    numbers, lines = _content_lines(_decode(_read_bytes(path, label), label))
+    if not lines:
+        raise InputError(f"{label}: empty file (no data lines)")
+    return numbers, lines
+
+
 def quote_token(token: str) -> str:
     """Quote a token for an error message, shortened to 30 characters."""
     return repr(token if len(token) <= 30 else token[:27] + "...")
@@ -254,9 +262,7 @@ def read_off(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     InputError
         For any problem with the file, naming the line where there is one.
     """
-    numbers, lines = _content_lines(_decode(_read_bytes(path, label), label))
-    if not lines:
-        raise InputError(f"{label}: empty file (no data lines)")
+    numbers, lines = _data_lines(path, label)
     tokens = lines[0].split()
     match = re.fullmatch(r"(ST)?C?N?(4?n?)OFF(\d*)", tokens[0])
     if match is None:
@@ -355,9 +361,7 @@ def read_obj(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     InputError
         For any problem with the file, naming the line where there is one.
     """
-    numbers, lines = _content_lines(_decode(_read_bytes(path, label), label))
-    if not lines:
-        raise InputError(f"{label}: empty file (no data lines)")
+    numbers, lines = _data_lines(path, label)
     stripped = [line.lstrip() for line in lines]
     keys = [line.split(None, 1)[0] for line in stripped]
     v_rows = [i for i, key in enumerate(keys) if key == "v"]
@@ -397,7 +401,5 @@ def read_xyz(path: str, label: str) -> tuple[np.ndarray, None]:
     InputError
         For any problem with the file, naming the line where there is one.
     """
-    numbers, lines = _content_lines(_decode(_read_bytes(path, label), label))
-    if not lines:
-        raise InputError(f"{label}: empty file (no data lines)")
+    numbers, lines = _data_lines(path, label)
     return _parse_points(numbers, lines, label, "point"), None

@@ -253,23 +253,22 @@ def extract_symmetries(
 
 
 def decide_identity(
-    ps: np.ndarray,
-    pt: np.ndarray,
     edges: np.ndarray,
     edge_length: np.ndarray,
     pair: Pairwise,
     outcome: BPOutcome,
     p: Params,
+    t_spacing: float,
 ) -> IdentityDecision:
     """The decision of ``trivial_weight="auto"`` on an identity-removed BP outcome: the
     weight the trivial match gets (0: a global symmetry, ``NO_PARTNER_WEIGHT``: partial).
 
     With the identity removed every row puts its mass somewhere, and on a shape without a
     global symmetry BP invents a self-map that keeps short distances only roughly; a true,
-    posed symmetry's argmax keeps nearly all of them.
+    posed symmetry's argmax keeps nearly all of them (within ``d_error`` or the target
+    spacing ``t_spacing``).
     """
-    t_spacing = p.target_spacing or sampling.spacing_for_count(1.0, len(pt))
-    graph = SourceGraph.from_edges(edges, edge_length, len(ps))
+    graph = SourceGraph.from_edges(edges, edge_length, len(outcome.marginals))
     kept = consistency(outcome.marginals.argmax(axis=1), graph, pair.targets, max(p.d_error, t_spacing))
     if kept >= p.isometry_threshold:
         return IdentityDecision(0.0, kept, p.isometry_threshold)
@@ -310,10 +309,10 @@ def _solve(
     clock.lap("unary")
     outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
     if outcome.identity is not None and p.trivial_weight == "auto":
-        outcome = dataclasses.replace(outcome, identity=decide_identity(ps, pt, edges, edge_length, pair, outcome, p))
-        if outcome.identity is not None and outcome.identity.weight > 0:
-            kept = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
-            outcome = dataclasses.replace(kept, identity=outcome.identity)
+        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing)
+        if identity.weight > 0:
+            outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
+        outcome = dataclasses.replace(outcome, identity=identity)
     clock.lap("bp")
     support = extraction_support(src, tgt, ps, pt, pair, edge_length, self_match)
     extraction = extract_symmetries(src, tgt, ps, pt, edges, support, outcome, p)
