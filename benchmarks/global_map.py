@@ -45,6 +45,7 @@ from intrinsym import evaluate, geodesics, shapes, unary
 from intrinsym.confidence import calibration, map_mass, mass_within, sample_images
 from intrinsym.extract import Symmetry, consistency
 from intrinsym.globalmap import best_spectral, choose, zoomout_map
+from intrinsym.params import CELL_RADIUS
 from intrinsym.pipeline import _min_vertices, extract_result
 from intrinsym.shape import Shape, clean, surface_area
 from intrinsym.support import SourceGraph
@@ -200,10 +201,16 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     spectrum = unary.spectrum(surf, p.eigenpairs)
     source_vertex = result.source_point_vertex
     maps = {"extraction": result.extraction_map()}
-    maps["zoomout"] = zoomout_map(surf, ps, pt, sym, spectrum[1], p)
 
     def images(vmap: np.ndarray) -> np.ndarray:
         return sample_images(vmap, source_vertex, result.support.vertex_target)
+
+    def sample_mass(image: np.ndarray) -> np.ndarray:
+        return mass_within(result.marginals, result.support.vertex_target[image], targets, CELL_RADIUS)
+
+    maps["zoomout"] = zoomout_map(
+        surf, ps, pt, sym, spectrum[1], p, source_vertex, result.support.vertex_source, sample_mass, maps["extraction"]
+    )
 
     def mass_of(vmap: np.ndarray) -> float:
         return float(mass_within(result.marginals, images(vmap), targets, p.mass_radius).mean())

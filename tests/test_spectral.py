@@ -58,7 +58,8 @@ def test_nearest_images_is_the_exact_nearest_neighbour():
     np.testing.assert_array_equal(spectral.nearest_images(source, target, C, chunk=256), expected)
 
 
-def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror):
+@pytest.mark.parametrize("involution", [False, True])
+def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror, involution):
     from intrinsym import descriptors
 
     v, f, sym = mirror
@@ -68,11 +69,17 @@ def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror):
     start = sym[samples].copy()
     wrong = np.random.default_rng(5).random(len(samples)) < 0.3
     start[wrong] = np.random.default_rng(6).integers(0, len(v), wrong.sum())
-    images, C = spectral.zoomout(phi[samples], phi, start, 6)
+    images, C = spectral.zoomout(phi[samples], phi, start, 6, involution)
     assert C.shape == (30, 30)
     assert np.mean(images == sym[samples]) > 0.95
     # a mirror maps each (non-repeated) eigenfunction to +- itself: C is nearly diagonal
     assert np.linalg.norm(np.diag(C)) ** 2 > 0.9 * np.linalg.norm(C) ** 2
+    if involution:  # the reversed pairs make C its own inverse (a mirror: C^2 = I)
+        assert np.linalg.norm(C @ C - np.eye(30)) < 0.1 * np.sqrt(30)
+        with pytest.raises(ValueError, match="self-maps"):
+            spectral.seeded_functional_maps(
+                v, evecs, samples, sym[samples], 6, 30, involutions=(True,), target_vertices=v, target_evecs=evecs
+            )
 
 
 def test_spectral_symmetry_finds_the_mirror(mirror):

@@ -3,8 +3,9 @@
 A self-matching run's global map can come from three places: the extraction's global
 symmetry extended to every vertex (:func:`intrinsym.vertex_maps.fitted_vertex_map`,
 resolved to the sample spacing), that symmetry refined by seeded ZoomOut in the
-Laplace-Beltrami eigenfunctions (:func:`intrinsym.spectral.seeded_symmetry`, vertex
-precision, but it can drift on strongly posed shapes), and the spectral baseline's
+Laplace-Beltrami eigenfunctions (:func:`zoomout_map`: vertex precision; fitted as the
+symmetry is and as its own inverse, the marginals choosing between the two fits cell by
+cell; it can still drift on strongly posed shapes), and the spectral baseline's
 candidates (sign search + ZoomOut, :func:`intrinsym.spectral.symmetry_candidates`),
 which need no marginals at all. The marginals judge: every candidate is scored by the
 marginal mass it keeps (:func:`intrinsym.confidence.kept_mass`, within
@@ -30,9 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import spectral
-from .confidence import kept_mass
+from .confidence import kept_mass, mass_within
 from .extract import Symmetry
-from .params import MAP_MARGIN, Params
+from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, Params
 from .support import Support
 from .surface import Surface
 from .vertex_maps import fitted_vertex_map
@@ -68,27 +69,90 @@ def _input_images(surface: Surface, image: np.ndarray) -> np.ndarray:
 
 
 def zoomout_map(
-    surface: Surface, ps: np.ndarray, pt: np.ndarray, symmetry: Symmetry, evecs: np.ndarray, p: Params
+    surface: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
+    symmetry: Symmetry,
+    evecs: np.ndarray,
+    p: Params,
+    source_vertex: np.ndarray,
+    vertex_source: np.ndarray,
+    sample_mass: Callable[[np.ndarray], np.ndarray],
+    guide: np.ndarray,
 ) -> np.ndarray:
     """The symmetry's sample pairs refined by seeded ZoomOut, as the image of every input
-    vertex (:func:`intrinsym.spectral.seeded_symmetry` on the working shape, the first
-    ``p.zoomout_seed`` eigenfunctions fitted to the pairs, up to ``p.zoomout_final``).
+    vertex.
+
+    Two fits of the first ``p.zoomout_seed`` eigenfunctions to the pairs, each refined
+    up to ``p.zoomout_final`` (:func:`intrinsym.spectral.seeded_functional_maps` on the
+    working shape): one as the symmetry is (plain), one as its own inverse (every pair
+    also reversed, ``involution=True``), which holds for a reflection and keeps the fit
+    from drifting on strongly posed shapes. The marginals judge them cell by cell: each
+    source sample's Voronoi cell follows the fit that keeps more of the sample's
+    marginal mass within ``CELL_RADIUS`` of its image, the involutive one on a tie (the
+    plain fit wins everywhere on a rotation, which is not its own inverse). A vertex's
+    involutive image farther than ``GUIDE_TOLERANCE`` from the extraction's image of it
+    (``guide``) is replaced by the plain fit's: the involutive fit can flip a small,
+    densely meshed part such as a head, around a sample it maps right.
+
+    Parameters
+    ----------
+    surface : Surface
+    ps, pt : (S,), (T,) int64
+        Working vertices of the source and target samples.
+    symmetry : Symmetry
+    evecs : (N, K) float array
+        Eigenfunctions of the working shape, constant first.
+    p : Params
+    source_vertex : (S,) int64
+        Input vertex of every source sample.
+    vertex_source : (N_in,) int64
+        Source sample whose cell holds each input vertex, -1 for none.
+    sample_mass : callable
+        (S,) input-vertex images of the source samples -> (S,) marginal mass within
+        ``CELL_RADIUS`` of each.
+    guide : (N_in,) int64
+        The extraction's image of every input vertex, -1 for none
+        (:func:`intrinsym.vertex_maps.fitted_vertex_map`).
 
     Returns
     -------
     (N_in,) int64
     """
-    image = spectral.seeded_symmetry(
+    fits = spectral.seeded_functional_maps(
         surface.shape.vertices,
         evecs,
         ps[symmetry.source],
         pt[symmetry.target],
         p.zoomout_seed,
         p.zoomout_final,
-        points=surface.vertex_map,
-        candidates=np.unique(surface.vertex_map),
+        involutions=(True, False),
     )
-    return _input_images(surface, image)
+    candidates = np.unique(surface.vertex_map)
+
+    def images_of(vertices: np.ndarray, C: np.ndarray) -> np.ndarray:
+        """Input vertices -> input-vertex images under the functional map C."""
+        points = surface.vertex_map[vertices]
+        return _input_images(surface, spectral.map_points(C, evecs, points, candidates))
+
+    masses = [sample_mass(images_of(source_vertex, C)) for C in fits]
+    plain_cell = masses[1] > masses[0]
+    cell = np.asarray(vertex_source, dtype=np.int64)
+    # vertices in no cell follow the fit most cells follow
+    plain = np.where(cell >= 0, plain_cell[np.maximum(cell, 0)], 2 * plain_cell.sum() > len(plain_cell))
+    image = np.empty(len(cell), dtype=np.int64)
+    involutive = np.flatnonzero(~plain)
+    image[involutive] = images_of(involutive, fits[0])
+    # the involutive image strays from the extraction's: the plain fit's instead
+    guide = np.asarray(guide, dtype=np.int64)
+    positions = surface.shape.vertices[surface.vertex_map]
+    stray = involutive[
+        (guide[involutive] >= 0)
+        & (np.linalg.norm(positions[image[involutive]] - positions[guide[involutive]], axis=1) > GUIDE_TOLERANCE)
+    ]
+    rest = np.concatenate([np.flatnonzero(plain), stray])
+    image[rest] = images_of(rest, fits[1])
+    return image
 
 
 def choose(masses: dict[str, float], fallback_mass: float) -> str:
@@ -148,9 +212,23 @@ def choose_global_map(
         image = np.asarray(vertex_map)[source_vertex]
         return kept_mass(marginals, np.where(image >= 0, support.vertex_target[np.maximum(image, 0)], -1), t, r)
 
+    def sample_mass(image: np.ndarray) -> np.ndarray:
+        return mass_within(marginals, support.vertex_target[image], t, CELL_RADIUS)
+
     maps = {"extraction": fitted_vertex_map(symmetry, support, *fit, p.extraction(False))}
     if p.zoomout and spectrum is not None and len(symmetry.source) >= p.zoomout_seed:
-        maps["zoomout"] = zoomout_map(surface, ps, pt, symmetry, spectrum[1], p)
+        maps["zoomout"] = zoomout_map(
+            surface,
+            ps,
+            pt,
+            symmetry,
+            spectrum[1],
+            p,
+            source_vertex,
+            support.vertex_source,
+            sample_mass,
+            maps["extraction"],
+        )
     masses = {name: mass_of(m) for name, m in maps.items()}
     if p.zoomout and spectrum is not None and masses[choose(masses, p.fallback_mass)] < p.fallback_mass:
         found = best_spectral(surface, source_vertex, spectrum, mass_of, p)

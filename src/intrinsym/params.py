@@ -33,6 +33,13 @@ NO_PARTNER_WEIGHT = 0.7
 #: sample spacing); a spectral candidate replaces the model's map only when it keeps this
 #: much more (:func:`intrinsym.globalmap.choose_global_map`; measured in docs/results.md).
 MAP_MARGIN = 0.1
+#: Radius (sqrt(area) units) of the marginal mass that chooses, per source sample's cell,
+#: between seeded ZoomOut's plain and involutive fits (:func:`intrinsym.globalmap.zoomout_map`).
+CELL_RADIUS = 0.05
+#: The involutive ZoomOut fit's image of a vertex is kept only within this distance
+#: (sqrt(area) units) of the extraction's image; beyond it, the plain fit's
+#: (:func:`intrinsym.globalmap.zoomout_map`).
+GUIDE_TOLERANCE = 0.05
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.

@@ -55,7 +55,9 @@ from . import descriptors, sampling
 __all__ = [
     "distortion",
     "isolated_eigenvalues",
+    "map_points",
     "nearest_images",
+    "seeded_functional_maps",
     "seeded_symmetry",
     "sign_candidates",
     "spectral_symmetry",
@@ -163,13 +165,19 @@ def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, chunk:
     return images
 
 
-def zoomout(source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int) -> tuple[np.ndarray, np.ndarray]:
+def zoomout(
+    source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int, involution: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """ZoomOut refinement of a point map between two sets of basis rows.
 
     For ``k = k_start, ..., K``: ``C`` (k, k) is the least-squares solution of
     ``target[images, :k] ~ source[:, :k] C``, then every source row's image becomes the
     target row nearest to ``source[:, :k] C``. For a self-map, ``source`` and ``target``
     are the eigenfunctions at two vertex subsets of the same shape.
+
+    With ``involution`` (a self-map that is its own inverse, such as a reflection), every
+    pair ``x -> T(x)`` also gives ``T(x) -> x``: both enter the least squares, which then
+    fits a ``C`` that maps the images back onto the points as well.
 
     Parameters
     ----------
@@ -182,6 +190,9 @@ def zoomout(source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start:
         Initial image (row of ``target``) of every source row.
     k_start : int
         Number of basis functions of the first iteration, 1 <= k_start <= K.
+    involution : bool
+        Fit the reversed pairs too (self-maps only: ``source`` and ``target`` rows of
+        one basis).
 
     Returns
     -------
@@ -193,6 +204,12 @@ def zoomout(source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start:
     src = np.asarray(source, dtype=np.float64)
     tgt = np.asarray(target, dtype=np.float64)
     images = np.asarray(images, dtype=np.int64)
+    if involution:
+        for k in range(k_start, src.shape[1] + 1):
+            a, b = src[:, :k], tgt[images, :k]
+            C = np.linalg.lstsq(np.vstack([a, b]), np.vstack([b, a]), rcond=None)[0]
+            images = nearest_images(src, tgt, C)
+        return images, C
     # source[:, :k] = Q[:, :k] R[:k, :k] for every k, and the leading block of the
     # triangular R^-1 is the inverse of R's: one QR serves all the levels
     q, r = np.linalg.qr(src)
@@ -366,6 +383,67 @@ def symmetry_candidates(
     return maps, distortions
 
 
+def seeded_functional_maps(
+    vertices: np.ndarray,
+    evecs: np.ndarray,
+    source: np.ndarray,
+    target: np.ndarray,
+    k_seed: int = 16,
+    n_final: int = 50,
+    n_samples: int = 500,
+    n_targets: int = 3000,
+    involutions: tuple[bool, ...] = (False,),
+    target_vertices: np.ndarray | None = None,
+    target_evecs: np.ndarray | None = None,
+) -> list[np.ndarray]:
+    """The functional map of :func:`seeded_symmetry`, before its last point map: one per
+    entry of ``involutions`` (the samples and the seed shared).
+
+    Parameters
+    ----------
+    vertices, evecs, source, target, k_seed, n_final, n_samples, n_targets
+        As in :func:`seeded_symmetry`.
+    involutions : tuple of bool
+        One ZoomOut per entry; True: the symmetry is its own inverse and ZoomOut fits
+        the reversed pairs too (:func:`zoomout`; self-maps only).
+    target_vertices, target_evecs
+        As in :func:`seeded_symmetry`.
+
+    Returns
+    -------
+    list of (n_final, n_final) float64
+        ``C``: vertex x maps to the vertex whose ``evecs[:, 1:n_final+1]`` row (of the
+        target shape) is nearest to ``evecs[x, 1:n_final+1] @ C``; ``n_final`` clamped
+        to the eigenfunctions there are.
+    """
+    n_final = min(n_final, evecs.shape[1] - 1)
+    source = np.asarray(source, dtype=np.int64)
+    target = np.asarray(target, dtype=np.int64)
+    if not 1 <= k_seed <= n_final or len(source) < k_seed or len(source) != len(target):
+        raise ValueError(
+            f"need 1 <= k_seed ({k_seed}) <= n_final ({n_final}) and at least k_seed pairs, "
+            f"got {len(source)} sources and {len(target)} targets"
+        )
+    if (target_vertices is None) != (target_evecs is None):
+        raise ValueError("give both target_vertices and target_evecs, or neither")
+    if any(involutions) and target_evecs is not None:
+        raise ValueError("involution applies to self-maps only")
+    if target_evecs is not None:
+        n_final = min(n_final, target_evecs.shape[1] - 1)
+    spread, n_samples = _spread(np.asarray(vertices, dtype=np.float64), n_samples, n_targets, n_final)
+    phi = np.asarray(evecs, dtype=np.float64)[:, 1 : n_final + 1]
+    if target_evecs is None:
+        psi, target_spread = phi, spread
+    else:
+        psi = np.asarray(target_evecs, dtype=np.float64)[:, 1 : n_final + 1]
+        target_spread = _spread(np.asarray(target_vertices, dtype=np.float64), n_samples, n_targets, n_final)[0]
+    C = np.linalg.lstsq(phi[source, :k_seed], psi[target, :k_seed], rcond=None)[0]
+    samples = phi[spread[:n_samples]]
+    targets = psi[target_spread]
+    start = nearest_images(samples, targets, C)
+    return [zoomout(samples, targets, start, k_seed, involution)[1] for involution in involutions]
+
+
 def seeded_symmetry(
     vertices: np.ndarray,
     evecs: np.ndarray,
@@ -387,7 +465,8 @@ def seeded_symmetry(
     map ``C`` (k_seed x k_seed) is the least-squares solution of ``phi[target, :k_seed]
     ~ phi[source, :k_seed] C``, it maps the ``n_samples`` farthest-point samples into
     the ``n_targets`` farthest-point targets, ZoomOut refines from ``k_seed`` to
-    ``n_final`` eigenfunctions (:func:`zoomout`), and its last ``C`` maps every vertex.
+    ``n_final`` eigenfunctions (:func:`zoomout`), and its last ``C``
+    (:func:`seeded_functional_maps`) maps every vertex.
     A small ``k_seed`` averages out the correspondences' errors (a few wrong pairs, or
     images only as precise as a sampling) but must resolve the symmetry.
 
@@ -421,29 +500,40 @@ def seeded_symmetry(
         symmetry, at vertex precision; raises ValueError if there are fewer pairs than
         ``k_seed`` or the sizes are out of range.
     """
-    n_final = min(n_final, evecs.shape[1] - 1)
-    source = np.asarray(source, dtype=np.int64)
-    target = np.asarray(target, dtype=np.int64)
-    if not 1 <= k_seed <= n_final or len(source) < k_seed or len(source) != len(target):
-        raise ValueError(
-            f"need 1 <= k_seed ({k_seed}) <= n_final ({n_final}) and at least k_seed pairs, "
-            f"got {len(source)} sources and {len(target)} targets"
-        )
-    if (target_vertices is None) != (target_evecs is None):
-        raise ValueError("give both target_vertices and target_evecs, or neither")
-    if target_evecs is not None:
-        n_final = min(n_final, target_evecs.shape[1] - 1)
-    spread, n_samples = _spread(np.asarray(vertices, dtype=np.float64), n_samples, n_targets, n_final)
-    phi = np.asarray(evecs, dtype=np.float64)[:, 1 : n_final + 1]
-    if target_evecs is None:
-        psi, target_spread = phi, spread
-    else:
-        psi = np.asarray(target_evecs, dtype=np.float64)[:, 1 : n_final + 1]
-        target_spread = _spread(np.asarray(target_vertices, dtype=np.float64), n_samples, n_targets, n_final)[0]
-    C = np.linalg.lstsq(phi[source, :k_seed], psi[target, :k_seed], rcond=None)[0]
-    samples = phi[spread[:n_samples]]
-    targets = psi[target_spread]
-    _, C = zoomout(samples, targets, nearest_images(samples, targets, C), k_seed)
+    [C] = seeded_functional_maps(
+        vertices,
+        evecs,
+        source,
+        target,
+        k_seed,
+        n_final,
+        n_samples,
+        n_targets,
+        target_vertices=target_vertices,
+        target_evecs=target_evecs,
+    )
+    return map_points(C, evecs, points, candidates, target_evecs)
+
+
+def map_points(
+    C: np.ndarray,
+    evecs: np.ndarray,
+    points: np.ndarray | None = None,
+    candidates: np.ndarray | None = None,
+    target_evecs: np.ndarray | None = None,
+) -> np.ndarray:
+    """The point map of a functional map ``C`` (k, k) in the eigenfunctions 1..k
+    (:func:`nearest_images`), from ``points`` (default: all vertices) onto ``candidates``
+    (default: all vertices of the target shape, ``target_evecs`` or the same one).
+
+    Returns
+    -------
+    (len(points),) int64
+        A vertex of ``candidates`` for every point.
+    """
+    k = len(C)
+    phi = np.asarray(evecs, dtype=np.float64)[:, 1 : k + 1]
+    psi = phi if target_evecs is None else np.asarray(target_evecs, dtype=np.float64)[:, 1 : k + 1]
     points = np.arange(len(phi)) if points is None else np.asarray(points, dtype=np.int64)
     candidates = np.arange(len(psi)) if candidates is None else np.asarray(candidates, dtype=np.int64)
     return candidates[nearest_images(phi[points], psi[candidates], C)]

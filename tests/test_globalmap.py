@@ -1,0 +1,91 @@
+"""The global map's two ZoomOut fits and the marginals' choice between them, cell by cell."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import intrinsym
+from intrinsym import descriptors, evaluate, shapes, spectral
+from intrinsym.extract import Symmetry
+from intrinsym.globalmap import zoomout_map
+from intrinsym.params import GUIDE_TOLERANCE
+from intrinsym.shape import from_arrays
+from intrinsym.surface import prepare, sample
+
+PARAMS = intrinsym.Params(zoomout_seed=6, zoomout_final=30)
+
+
+def _setup(v, f, sym):
+    """Working surface, samples, the symmetry's sample pairs, eigenfunctions and the
+    (Euclidean) cell of every vertex."""
+    surf = prepare(from_arrays(v, f))
+    assert np.array_equal(surf.vertex_map, np.arange(len(v)))  # nothing cleaned away, no subdivision
+    pt, ps = sample(surf, 600, None, 0), sample(surf, 60, None, 1)
+    work = surf.shape.vertices
+    pairs = Symmetry(np.arange(len(ps)), cKDTree(work[pt]).query(work[sym[ps]])[1], 1.0, 1.0, "global")
+    evecs = descriptors.eigenpairs(work, surf.shape.faces, 31)[1]
+    return surf, ps, pt, pairs, evecs, cKDTree(work[ps]).query(work)[1]
+
+
+def _prefer(fit: int, n: int):
+    """A judge that gives the involutive (0) or the plain (1) fit all the mass."""
+    return _judge(lambda i, _: np.full(n, float(i == fit)))
+
+
+def _judge(mass_of_fit):
+    """sample_mass for zoomout_map: the first call scores the involutive fit, the second
+    the plain one; ``mass_of_fit(index, image)`` gives the masses."""
+    calls: list[np.ndarray] = []
+
+    def sample_mass(image: np.ndarray) -> np.ndarray:
+        calls.append(image)
+        return mass_of_fit(len(calls) - 1, image)
+
+    return sample_mass
+
+
+def test_the_involutive_fit_of_a_mirror_is_its_own_inverse(mirror):
+    v, f, sym = mirror
+    surf, ps, pt, pairs, evecs, cells = _setup(v, f, sym)
+    unguided = np.full(len(v), -1, dtype=np.int64)
+    involutive = zoomout_map(surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _prefer(0, len(ps)), unguided)
+    plain = zoomout_map(surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _prefer(1, len(ps)), unguided)
+    # the plain fit is seeded_symmetry's map
+    work = surf.shape.vertices
+    np.testing.assert_array_equal(plain, spectral.seeded_symmetry(work, evecs, ps, pt[pairs.target], 6, 30))
+    assert evaluate.score_map(involutive, from_arrays(v, f), sym).within(0.05) > 0.99
+    assert np.mean(involutive[involutive] == np.arange(len(v))) > 0.95
+
+
+def test_a_rotation_follows_the_plain_fit_where_the_marginals_say_so():
+    # A five-armed star's rotation by 72 degrees is not its own inverse: its involutive
+    # fit is wrong, and a judge that knows the truth sends every cell to the plain one.
+    star = shapes.star(5, resolution=8)
+    v, f, rotation = star.vertices, star.faces, star.symmetries[1]
+    surf, ps, pt, pairs, evecs, cells = _setup(v, f, rotation)
+    unguided = np.full(len(v), -1, dtype=np.int64)
+    work = surf.shape.vertices
+
+    def truth(_, image):
+        return (np.linalg.norm(work[image] - work[rotation[ps]], axis=1) < 0.05).astype(float)
+
+    chosen = zoomout_map(surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _judge(truth), unguided)
+    shape = from_arrays(v, f)
+    scores = evaluate.score_map(chosen, shape, rotation)
+    assert scores.within(0.10) > 0.98 and scores.mean_error < 0.01, scores.mean_error
+    # half the cells each way: every vertex follows its cell's winner
+    plain = zoomout_map(surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _prefer(1, len(ps)), unguided)
+    involutive = zoomout_map(surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _prefer(0, len(ps)), unguided)
+    assert evaluate.score_map(involutive, shape, rotation).within(0.10) < 0.5
+    half = work[ps][:, 1] > 0
+    mixed = zoomout_map(
+        surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _judge(lambda i, _: np.where(half, float(i), 1.0 - i)), unguided
+    )
+    np.testing.assert_array_equal(mixed, np.where(half[cells], plain, involutive))
+    # guided by the true rotation, the involutive fit's images (far from it) give way
+    # to the plain fit's wherever they stray more than GUIDE_TOLERANCE
+    guided = zoomout_map(surf, ps, pt, pairs, evecs, PARAMS, ps, cells, _prefer(0, len(ps)), rotation)
+    stray = np.linalg.norm(work[involutive] - work[rotation], axis=1) > GUIDE_TOLERANCE
+    assert stray.mean() > 0.5
+    np.testing.assert_array_equal(guided, np.where(stray, plain, involutive))
