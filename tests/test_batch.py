@@ -205,8 +205,14 @@ def test_an_interrupted_batch_resumes_on_a_separately_started_scheduler(meshes: 
         )
         address = json.loads(file.read_text())["address"]
         out = tmp_path / "out"
-        names = ["cubo", "star", "spot"]
-        inputs = [str(meshes / m) for m in ("cubo.off", "star.off", "spot.obj")]
+        # twice each shape: several items are still to run when the first is stored
+        folder = tmp_path / "in"
+        folder.mkdir()
+        for m in ("cubo.off", "star.off", "spot.obj"):
+            for copy in ("", "_b"):
+                shutil.copy(meshes / m, folder / m.replace(".", f"{copy}."))
+        names = ["cubo", "star", "spot", "cubo_b", "star_b", "spot_b"]
+        inputs = [str(p) for p in sorted(folder.iterdir())]
         command = [sys.executable, "-m", "intrinsym", "batch", *inputs, "-o", str(out), "--scheduler", address]
         client = subprocess.Popen([*command, *TINY_FLAGS, "--quiet"], env=env)
         _wait_for(lambda: any(items.stored_key(out / n) for n in names))
