@@ -214,7 +214,13 @@ def test_an_interrupted_batch_resumes_on_a_separately_started_scheduler(meshes: 
         names = ["cubo", "star", "spot", "cubo_b", "star_b", "spot_b"]
         inputs = [str(p) for p in sorted(folder.iterdir())]
         command = [sys.executable, "-m", "intrinsym", "batch", *inputs, "-o", str(out), "--scheduler", address]
-        client = subprocess.Popen([*command, *TINY_FLAGS, "--quiet"], env=env)
+        # a user's Ctrl-C reaches a process with the default SIGINT handler; a child
+        # inherits "ignore" from a parent (here: the test runner) that has set it
+        client = subprocess.Popen(
+            [*command, *TINY_FLAGS, "--quiet"],
+            env=env,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        )
         _wait_for(lambda: any(items.stored_key(out / n) for n in names))
         client.send_signal(signal.SIGINT)
         assert client.wait(60) == 130
