@@ -54,8 +54,7 @@ def test_nearest_images_is_the_exact_nearest_neighbour():
     source, target = rng.normal(size=(700, 12)), rng.normal(size=(1500, 12))
     C = np.linalg.qr(rng.normal(size=(10, 10)))[0]
     expected = cKDTree(target[:, :10]).query(source[:, :10] @ C)[1]
-    # chunks of 256 rows cover the last partial chunk too
-    np.testing.assert_array_equal(spectral.nearest_images(source, target, C, chunk=256), expected)
+    np.testing.assert_array_equal(spectral.nearest_images(source, target, C), expected)
 
 
 @pytest.mark.parametrize("involution", [False, True])

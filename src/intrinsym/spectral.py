@@ -50,7 +50,7 @@ from scipy.linalg import solve_triangular
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
-from . import descriptors, sampling
+from . import descriptors, neighbours, sampling
 
 __all__ = [
     "distortion",
@@ -126,7 +126,7 @@ def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarra
     return signs[best], residuals[best]
 
 
-def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, chunk: int = 1024) -> np.ndarray:
+def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray) -> np.ndarray:
     """The point map of a functional map: each source row to the nearest target row.
 
     Parameters
@@ -137,32 +137,16 @@ def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, chunk:
         The same basis at the candidate images.
     C : (k, k) float array
         Functional map in the first k basis functions (``target[T(x), :k] ~ source[x, :k] C``).
-    chunk : int
-        Source rows per matrix product (memory: ``chunk`` x T float32).
 
     Returns
     -------
     (S,) int64
-        Row of ``target`` nearest to ``source[x, :k] C`` for every source row x.
-
-    Notes
-    -----
-    Exhaustive, in float32 matrix products of ``chunk`` rows: a k-d tree in 50
-    dimensions degrades with the fit of ``C`` (the last map of michael2, 52k vertices:
-    24 s with a tree; a random orthogonal ``C``: 456 s, against 8.6 s here while another
-    job shared the two cores); nearly tied neighbours may swap with the rounding.
+        Row of ``target`` nearest to ``source[x, :k] C`` for every source row x
+        (:func:`intrinsym.neighbours.nearest_rows`, exact).
     """
     k = len(C)
-    query = (np.asarray(source, dtype=np.float64)[:, :k] @ C).astype(np.float32)
-    basis = np.ascontiguousarray(np.asarray(target)[:, :k], dtype=np.float32)
-    half_norm = 0.5 * np.einsum("ij,ij->i", basis, basis)
-    images = np.empty(len(query), dtype=np.int64)
-    for lo in range(0, len(query), chunk):
-        # |q - x|^2 / 2 - |q|^2 / 2 = |x|^2 / 2 - q.x
-        gram = query[lo : lo + chunk] @ basis.T
-        np.subtract(half_norm, gram, out=gram)
-        images[lo : lo + chunk] = np.argmin(gram, axis=1)
-    return images
+    query = np.asarray(source, dtype=np.float64)[:, :k] @ C
+    return neighbours.nearest_rows(query, np.asarray(target, dtype=np.float64)[:, :k])
 
 
 def zoomout(

@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from intrinsym import descriptors, neighbours, shapes
+
+
+def _exact(query, basis):
+    return cKDTree(basis).query(query)[1]
+
+
+@pytest.mark.parametrize("n_clusters", [None, 1, 7, 1500])
+def test_unstructured_rows_match_a_kd_tree(n_clusters):
+    # Gaussian rows in 12 dimensions: no surface to exploit, the pruning still exact
+    rng = np.random.default_rng(0)
+    basis, query = rng.normal(size=(1500, 12)), rng.normal(size=(900, 12))
+    got = neighbours.nearest_rows(query, basis, n_clusters=n_clusters)
+    np.testing.assert_array_equal(got, _exact(query, basis))
+
+
+def test_a_functional_maps_point_map_matches_a_kd_tree():
+    # eigenfunction rows of a star (a surface in 30 dimensions) under the functional map
+    # of its rotation, fitted by least squares, plus noise: the case the clusters are for
+    shape = shapes.star(arms=5, resolution=16)
+    _, evecs = descriptors.eigenpairs(shape.vertices, shape.faces, 31)
+    basis = evecs[:, 1:]
+    C = np.linalg.lstsq(basis, basis[shape.symmetries[0]], rcond=None)[0]
+    query = basis @ C + 0.02 * np.random.default_rng(1).normal(size=basis.shape)
+    np.testing.assert_array_equal(neighbours.nearest_rows(query, basis), _exact(query, basis))
+
+
+def test_rows_far_from_the_origin_do_not_lose_their_nearest_neighbour():
+    # |x|^2 / 2 - q.x in float32 cancels when the rows' norm dwarfs their spacing
+    rng = np.random.default_rng(2)
+    basis = 1000.0 + rng.uniform(size=(2000, 8))
+    query = 1000.0 + rng.uniform(size=(500, 8))
+    x32, q32 = basis.astype(np.float32), query.astype(np.float32)
+    float32_products = np.argmin(0.5 * np.einsum("ij,ij->i", x32, x32) - q32 @ x32.T, axis=1)
+    exact = _exact(query, basis)
+    assert np.mean(float32_products != exact) > 0.1
+    np.testing.assert_array_equal(neighbours.nearest_rows(query, basis), exact)
+
+
+def test_exact_ties_go_to_the_smallest_row():
+    basis = np.repeat(np.eye(4), 3, axis=0)  # every row three times
+    got = neighbours.nearest_rows(np.eye(4) * 0.9, basis, n_clusters=3)
+    np.testing.assert_array_equal(got, [0, 3, 6, 9])
+
+
+def test_shapes_are_checked():
+    assert neighbours.nearest_rows(np.empty((0, 3)), np.ones((5, 3))).shape == (0,)
+    with pytest.raises(ValueError, match="rows"):
+        neighbours.nearest_rows(np.ones((4, 3)), np.ones((5, 2)))
+    with pytest.raises(ValueError, match="rows"):
+        neighbours.nearest_rows(np.ones((4, 3)), np.empty((0, 3)))
