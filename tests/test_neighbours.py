@@ -41,9 +41,12 @@ def test_rows_far_from_the_origin_do_not_lose_their_nearest_neighbour():
     np.testing.assert_array_equal(neighbours.nearest_rows(query, basis), exact)
 
 
-def test_exact_ties_go_to_the_smallest_row():
-    basis = np.repeat(np.eye(4), 3, axis=0)  # every row three times
-    got = neighbours.nearest_rows(np.eye(4) * 0.9, basis, n_clusters=3)
+@pytest.mark.parametrize("scale", [0.9, 1.0])
+def test_exact_ties_go_to_the_smallest_row(scale):
+    # every row three times, in different clusters; at scale 1 the queries are rows
+    # (distance 0, where the bound has no relative slack to spare)
+    basis = np.repeat(np.eye(4) * 1000.0, 3, axis=0)
+    got = neighbours.nearest_rows(np.eye(4) * 1000.0 * scale, basis, n_clusters=6)
     np.testing.assert_array_equal(got, [0, 3, 6, 9])
 
 

@@ -16,8 +16,9 @@ import numpy as np
 
 __all__ = ["nearest_rows"]
 
-#: Relative slack of the pruning bound, far above the float64 rounding of the distances
-#: to the cluster centres (which come from matrix products).
+#: Slack of the pruning bound, relative to the best distance and, for queries on a row, to
+#: the largest norm: far above the float64 rounding of the distances to the cluster
+#: centres, which come from matrix products (about 1e-8 of the norm near a centre).
 PRUNE_SLACK = 1e-6
 
 #: Queries whose distances to the cluster centres are held at once (x clusters float64).
@@ -34,6 +35,7 @@ def _search(
     radius: np.ndarray,
     starts: np.ndarray,
     members: np.ndarray,
+    floor: float,
 ) -> np.ndarray:
     """Nearest basis row of every query, visiting only the clusters that can hold it.
 
@@ -47,6 +49,8 @@ def _search(
         Largest distance of a cluster's rows to its centre.
     starts, members : (m + 1,), (T,) int64
         The rows of cluster j are ``members[starts[j]:starts[j + 1]]``.
+    floor : float
+        Absolute slack of the bound (:data:`PRUNE_SLACK` times the largest norm).
 
     Returns
     -------
@@ -64,7 +68,7 @@ def _search(
         for step in range(m + 1):
             # the nearest centre's cluster first: its rows bound the distance early
             j = first if step == 0 else step - 1
-            if step > 0 and (j == first or to_centre[i, j] - radius[j] > np.sqrt(best) * (1.0 + PRUNE_SLACK)):
+            if step > 0 and (j == first or to_centre[i, j] - radius[j] > np.sqrt(best) * (1.0 + PRUNE_SLACK) + floor):
                 continue
             for p in range(starts[j], starts[j + 1]):
                 row = members[p]
@@ -126,8 +130,10 @@ def nearest_rows(query: np.ndarray, basis: np.ndarray, n_clusters: int | None = 
     np.maximum.at(radius, cluster, np.linalg.norm(x - centres[cluster], axis=1))
     members = np.argsort(cluster, kind="stable")
     starts = np.searchsorted(cluster[members], np.arange(m + 1))
+    norms = [np.sqrt(np.einsum("ij,ij->i", a, a).max(initial=0.0)) for a in (q, x)]
+    floor = PRUNE_SLACK * max(norms)
     nearest = np.empty(len(q), dtype=np.int64)
     for lo in range(0, len(q), CHUNK):
         block = q[lo : lo + CHUNK]
-        nearest[lo : lo + CHUNK] = _search(block, x, _distances(block, centres), radius, starts, members)
+        nearest[lo : lo + CHUNK] = _search(block, x, _distances(block, centres), radius, starts, members, floor)
     return nearest
