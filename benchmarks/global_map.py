@@ -44,8 +44,7 @@ from intrinsym import _extract_kernels as kernels
 from intrinsym import evaluate, geodesics, shapes, unary
 from intrinsym.confidence import calibration, map_mass, mass_within, sample_images
 from intrinsym.extract import Symmetry, consistency
-from intrinsym.globalmap import best_spectral, choose, zoomout_map
-from intrinsym.params import CELL_RADIUS
+from intrinsym.globalmap import best_spectral, cell_mass, choose, zoomout_map
 from intrinsym.pipeline import _min_vertices, extract_result
 from intrinsym.shape import Shape, clean, surface_area
 from intrinsym.support import SourceGraph
@@ -205,11 +204,9 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     def images(vmap: np.ndarray) -> np.ndarray:
         return sample_images(vmap, source_vertex, result.support.vertex_target)
 
-    def sample_mass(image: np.ndarray) -> np.ndarray:
-        return mass_within(result.marginals, result.support.vertex_target[image], targets, CELL_RADIUS)
-
+    judge = cell_mass(result.marginals, result.support)
     maps["zoomout"] = zoomout_map(
-        surf, ps, pt, sym, spectrum[1], p, source_vertex, result.support.vertex_source, sample_mass, maps["extraction"]
+        surf, ps, pt, sym, spectrum[1], p, source_vertex, result.support.vertex_source, judge, maps["extraction"]
     )
 
     def mass_of(vmap: np.ndarray) -> float:

@@ -68,6 +68,16 @@ def _input_images(surface: Surface, image: np.ndarray) -> np.ndarray:
     return surface.nearest_input_vertex(surface.shape.vertices[image])
 
 
+def cell_mass(marginals: np.ndarray, support: Support) -> Callable[[np.ndarray], np.ndarray]:
+    """The judge of :func:`zoomout_map` from BP's marginals: (S,) input-vertex images of
+    the source samples -> (S,) marginal mass within ``CELL_RADIUS`` of each."""
+
+    def sample_mass(image: np.ndarray) -> np.ndarray:
+        return mass_within(marginals, support.vertex_target[image], support.targets, CELL_RADIUS)
+
+    return sample_mass
+
+
 def zoomout_map(
     surface: Surface,
     ps: np.ndarray,
@@ -110,7 +120,7 @@ def zoomout_map(
         Source sample whose cell holds each input vertex, -1 for none.
     sample_mass : callable
         (S,) input-vertex images of the source samples -> (S,) marginal mass within
-        ``CELL_RADIUS`` of each.
+        ``CELL_RADIUS`` of each (:func:`cell_mass`).
     guide : (N_in,) int64
         The extraction's image of every input vertex, -1 for none
         (:func:`intrinsym.vertex_maps.fitted_vertex_map`).
@@ -212,9 +222,6 @@ def choose_global_map(
         image = np.asarray(vertex_map)[source_vertex]
         return kept_mass(marginals, np.where(image >= 0, support.vertex_target[np.maximum(image, 0)], -1), t, r)
 
-    def sample_mass(image: np.ndarray) -> np.ndarray:
-        return mass_within(marginals, support.vertex_target[image], t, CELL_RADIUS)
-
     maps = {"extraction": fitted_vertex_map(symmetry, support, *fit, p.extraction(False))}
     if p.zoomout and spectrum is not None and len(symmetry.source) >= p.zoomout_seed:
         maps["zoomout"] = zoomout_map(
@@ -226,7 +233,7 @@ def choose_global_map(
             p,
             source_vertex,
             support.vertex_source,
-            sample_mass,
+            cell_mass(marginals, support),
             maps["extraction"],
         )
     masses = {name: mass_of(m) for name, m in maps.items()}
