@@ -94,14 +94,16 @@ def heap_pop(hd: np.ndarray, hv: np.ndarray, pos: np.ndarray, size: int) -> tupl
 @nb.njit(cache=True, nogil=True)
 def grow_float(a: np.ndarray, used: int) -> np.ndarray:
     b = np.empty(2 * len(a), dtype=a.dtype)
-    b[:used] = a[:used]
+    for i in range(used):  # a loop: slice assignment compiles its shape check slowly
+        b[i] = a[i]
     return b
 
 
 @nb.njit(cache=True, nogil=True)
 def grow_int(a: np.ndarray, used: int) -> np.ndarray:
     b = np.empty(2 * len(a), dtype=a.dtype)
-    b[:used] = a[:used]
+    for i in range(used):  # a loop: slice assignment compiles its shape check slowly
+        b[i] = a[i]
     return b
 
 
@@ -142,13 +144,13 @@ def ball_rows(
     out_c = np.empty(1024, dtype=np.int64)
     out_d = np.empty(1024, dtype=np.float64)
     counts = np.zeros(len(sources), dtype=np.int64)
-    total = 0
+    total = np.int64(0)  # not a literal 0: grow_* would compile a second signature for it
     for k in range(len(sources)):
         s = sources[k]
         dist[s] = 0.0
         touched[0] = s
         n_touched = 1
-        size = heap_set(hd, hv, pos, 0, 0.0, s)
+        size = heap_set(hd, hv, pos, np.int64(0), 0.0, s)  # a literal 0 compiles a second signature
         while size > 0:
             d, u = heap_pop(hd, hv, pos, size)
             size -= 1
@@ -306,7 +308,7 @@ def pair_block(
         dist[s] = 0.0
         touched[0] = s
         n_touched = 1
-        size = heap_set(hd, hv, pos, 0, 0.0, s)
+        size = heap_set(hd, hv, pos, np.int64(0), 0.0, s)  # a literal 0 compiles a second signature
         while size > 0 and remaining > 0:
             d, u = heap_pop(hd, hv, pos, size)
             size -= 1

@@ -25,15 +25,13 @@ def find(t_ptr, t_idx, t_dist, a, b, limit):
 
 
 @nb.njit(cache=True)
-def peaks(row, t_ptr, t_idx, t_dist, threshold, radius):
-    """Distinct peaks of one max-normalised marginal row, strongest first.
+def peaks(cand, n_t, t_ptr, t_idx, t_dist, radius):
+    """Distinct peaks among candidate targets ``cand``, given strongest first.
 
-    Greedy non-maximum suppression: the strongest remaining target >= threshold is a
-    peak and suppresses every target within ``radius`` of it.
+    Greedy non-maximum suppression: the strongest remaining candidate is a peak and
+    suppresses every target within ``radius`` of it.
     """
-    cand = np.flatnonzero(row >= threshold)
-    cand = cand[np.argsort(-row[cand], kind="mergesort")]
-    gone = np.zeros(len(row), dtype=np.bool_)
+    gone = np.zeros(n_t, dtype=np.bool_)
     out = np.empty(len(cand), dtype=np.int64)
     k = 0
     for t in cand:

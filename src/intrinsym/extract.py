@@ -87,7 +87,9 @@ def peaks(row: np.ndarray, targets: SparseDistances, threshold: float, radius: f
     """
     r = np.asarray(row, dtype=np.float32)
     r = r / r.max() if r.max() > 0 else r
-    return kernels.peaks(r, targets.indptr, targets.indices, targets.dist, threshold, radius)
+    cand = np.flatnonzero(r >= threshold)
+    cand = cand[np.argsort(-r[cand], kind="stable")]  # here, not in the kernel: Numba's sort compiles slowly
+    return kernels.peaks(cand, len(r), targets.indptr, targets.indices, targets.dist, radius)
 
 
 def grow(

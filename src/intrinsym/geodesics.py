@@ -171,7 +171,9 @@ def _ring_pairs(adj_ptr: np.ndarray, adj_idx: np.ndarray, rings: int) -> np.ndar
                     if w > u:
                         if k == len(out):
                             grown = np.empty((2 * len(out), 2), dtype=np.int64)
-                            grown[:k] = out[:k]
+                            for i in range(k):  # a loop: slice assignment compiles slowly
+                                grown[i, 0] = out[i, 0]
+                                grown[i, 1] = out[i, 1]
                             out = grown
                         out[k, 0] = u
                         out[k, 1] = w

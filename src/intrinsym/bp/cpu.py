@@ -105,10 +105,13 @@ def _sweep(
     hsum,
     colmax,
     moved,
+    order,
 ):
     """Run one iteration of message updates; return the largest change.
 
-    ``moved[d]`` receives the largest change of every directed edge d sent.
+    ``moved[d]`` receives the largest change of every directed edge d sent. A batch's
+    messages ``steps_out[e0:e0 + n_b]`` in order of edge length are those at the
+    positions ``order[e0:e0 + n_b]`` within it (:func:`_by_length`).
 
     ``read`` holds the incoming messages, ``write`` receives the outgoing ones (the same
     array in the serial schedules). The steps of one batch read their inputs before any
@@ -132,11 +135,13 @@ def _sweep(
         if n_b == 0:
             continue
         outs = steps_out[e0 : e0 + n_b]
-        lengths = edge_length[outs >> 1]
-        order = np.argsort(lengths)
+        by_length = order[e0 : e0 + n_b]
+        # explicit loops: Numba's argsort, fancy indexing and slice assignment compile slowly
         col = np.empty(n_b, dtype=np.int64)
-        col[order] = np.arange(n_b)
-        d = lengths[order]
+        d = np.empty(n_b, dtype=edge_length.dtype)
+        for i in range(n_b):
+            col[by_length[i]] = i
+            d[i] = edge_length[outs[by_length[i]] >> 1]
         first = d[0] - dlt
         last = d[n_b - 1] + dlt
         for f in nb.prange(n_t):
@@ -149,10 +154,18 @@ def _sweep(
                     ht[f, col[i - e0]] = p / read[steps_out[i] ^ 1, f]
         for fq in nb.prange(n_t):
             acc = ring[fq, :n_b]
-            acc[:] = zero
+            for c in range(n_b):
+                acc[c] = zero
             a = indptr[fq]
             b = indptr[fq + 1]
-            j = a + np.searchsorted(dist[a:b], first, side="right")
+            j = a  # the first entry > first: searchsorted(side="right"), by bisection
+            top = b
+            while j < top:
+                mid = (j + top) >> 1
+                if dist[mid] <= first:
+                    j = mid + 1
+                else:
+                    top = mid
             lo = 0
             hi = 0
             while j < b and dist[j] < last:
@@ -187,12 +200,9 @@ def _sweep(
                     v = ring[f, c] + rho2 * hsum[c]
                     ring[f, c] = v
                     colmax[c] = max(colmax[c], v)
-        for blk in nb.prange(n_blk):
-            c_lo = blk * 16
-            c_hi = min(n_b, c_lo + 16)
             local = 0.0
             for c in range(c_lo, c_hi):
-                out = outs[order[c]]
+                out = outs[by_length[c]]
                 m = colmax[c]
                 mc = 0.0
                 for f in range(n_t):
@@ -204,6 +214,20 @@ def _sweep(
                 local = max(local, mc)
             change = max(change, local)
     return change
+
+
+def _by_length(steps: Steps, edge_length: np.ndarray) -> np.ndarray:
+    """Every batch's messages sorted by edge length, as positions within the batch.
+
+    Returns
+    -------
+    (2E,) int64
+        Entries ``ptr[batch[b]]:ptr[batch[b + 1]]`` order the messages of batch b.
+    """
+    sizes = np.diff(steps.ptr[steps.batch])
+    batch = np.repeat(np.arange(len(sizes)), sizes)
+    start = np.repeat(steps.ptr[steps.batch[:-1]], sizes)
+    return np.lexsort((edge_length[steps.out >> 1], batch)) - start
 
 
 def sparse_sweep(mrf: MRF, dtype: type = np.float32, damping: float = 0.0) -> Sweep:
@@ -275,6 +299,7 @@ def sparse_sweep(mrf: MRF, dtype: type = np.float32, damping: float = 0.0) -> Sw
             work["hsum"],
             work["colmax"],
             moved,
+            _by_length(steps, edge_length),
         )
 
     return sweep
