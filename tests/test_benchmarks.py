@@ -138,3 +138,25 @@ def test_calibration_leaves_each_class_out():
     per_class, conf, count, within = calibration.leave_one_class_out(rows)
     assert [c["ece_calibrated"] for c in per_class] == pytest.approx([1.0, 1.0])
     assert per_class[0]["global"] == [("a0", pytest.approx(0.0), pytest.approx(1.0))]
+
+
+def test_refine_table_by_hand(tmp_path, capsys):
+    import refine
+
+    settings = [(20, 2.0), (15, 2.0)]
+    rows = [
+        {"shape": "a", "before": (0.5, 0.9, 0.04), (20, 2.0): (0.75, 1.0, 0.02), (15, 2.0): (0.25, 0.9, 0.05)},
+        {"shape": "b", "before": (1.0, 1.0, 0.01), (20, 2.0): (1.0, 1.0, 0.01), (15, 2.0): (1.0, 1.0, 0.01)},
+    ]
+    rows[0]["moved"], rows[1]["moved"] = 0.5, 0.0
+    lines = refine.markdown(rows, settings).splitlines()
+    assert lines[0] == (
+        "| shape | before: within 0.05 / 0.10 / mean error | 20 anchors, 2 spacings | 15 anchors, 2 spacings "
+        "| moved (first setting) |"
+    )
+    assert lines[2] == "| a | 0.500 / 0.900 / 0.0400 | 0.750 / 1.000 / 0.0200 | 0.250 / 0.900 / 0.0500 | 0.50 |"
+    assert lines[5].startswith("- 20 anchors, 2 spacings: mean within 0.05 0.750 -> 0.875, within 0.10 0.950 -> 1.000")
+    assert "within 0.05 >= 0.90: 1 -> 1" in lines[5] and "largest loss within 0.05 +0.000 (b)" in lines[5]
+    assert "largest loss within 0.05 -0.250 (a), within 0.10 +0.000" in lines[6]
+    assert refine.main(["--data", str(tmp_path / "absent"), "--saved", str(tmp_path)]) == 0
+    assert "skipped" in capsys.readouterr().out

@@ -18,9 +18,11 @@ mass within 0.10. The spectral candidates are only
 tried when the chosen map keeps less than ``Params.fallback_mass``, and replace it only
 when they keep ``MAP_MARGIN`` more.
 
-The kept mass of the winner is recorded as the global map's mass (``run.json``'s
-``global_map``). Only a run whose extraction found a global symmetry gets a global map:
-the spectral candidates replace a weak map, they never invent a global symmetry.
+The winner is then refined by geodesic trilateration to the marginals' sample images
+(:func:`refined_map`, :mod:`intrinsym.refine`), and its kept mass is recorded as the
+global map's mass (``run.json``'s ``global_map``). Only a run whose extraction found a
+global symmetry gets a global map: the spectral candidates replace a weak map, they
+never invent a global symmetry.
 """
 
 from __future__ import annotations
@@ -33,7 +35,8 @@ import numpy as np
 from . import spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
-from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, Params
+from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, Params
+from .refine import agreeing_anchors, trilaterate
 from .support import Support
 from .surface import Surface
 from .vertex_maps import fitted_vertex_map
@@ -54,13 +57,17 @@ class GlobalMap:
     source : str
         Which candidate won: "extraction", "zoomout" or "spectral".
     masses : dict of str to float
-        Kept mass of every candidate tried ("spectral" is the best spectral candidate).
+        Kept mass of every candidate tried ("spectral" is the best spectral candidate),
+        before the refinement.
+    refined : float
+        Share of the input vertices whose image :func:`refined_map` moved.
     """
 
     vertex_map: np.ndarray
     mass: float
     source: str
     masses: dict[str, float]
+    refined: float = 0.0
 
 
 def _input_images(surface: Surface, image: np.ndarray) -> np.ndarray:
@@ -185,12 +192,14 @@ def choose_global_map(
     support: Support,
     spectrum: tuple[np.ndarray, np.ndarray] | None,
     fit: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    spacing: float,
     p: Params,
 ) -> GlobalMap:
-    """Score the candidate global maps by the marginal mass they keep; choose one.
+    """Score the candidate global maps by the marginal mass they keep; choose one, refine it.
 
     ZoomOut's map unless it keeps ``MAP_MARGIN`` less mass than the extraction's; below
     ``p.fallback_mass``, the best spectral candidate when it keeps ``MAP_MARGIN`` more.
+    The winner is refined by :func:`refined_map` unless ``p.refine_anchors`` is 0.
 
     Parameters
     ----------
@@ -209,6 +218,8 @@ def choose_global_map(
     fit : ((E, 2), (S, 3), (T, 3), (T,)) arrays
         Source-graph edges, source and target sample positions (input coordinates) and
         the input vertex of every target sample, for :func:`fitted_vertex_map`.
+    spacing : float
+        Target spacing (sqrt(area) units), the scale of the refinement's tolerance.
     p : Params
 
     Returns
@@ -242,7 +253,69 @@ def choose_global_map(
         if found is not None:
             maps["spectral"], masses["spectral"] = found
     best = choose(masses, p.fallback_mass)
-    return GlobalMap(np.asarray(maps[best], dtype=np.int64), masses[best], best, masses)
+    vertex_map = np.asarray(maps[best], dtype=np.int64)
+    if p.refine_anchors == 0:
+        return GlobalMap(vertex_map, masses[best], best, masses)
+    refined = refined_map(surface, ps, pt, source_vertex, marginals, vertex_map, spacing, p)
+    moved = float(np.mean(refined != vertex_map))
+    return GlobalMap(refined, mass_of(refined), best, masses, moved)
+
+
+def refined_map(
+    surface: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
+    source_vertex: np.ndarray,
+    marginals: np.ndarray,
+    vertex_map: np.ndarray,
+    spacing: float,
+    p: Params,
+    tolerance: float = REFINE_TOLERANCE,
+) -> np.ndarray:
+    """The global map refined by geodesic trilateration (:func:`intrinsym.refine.trilaterate`).
+
+    Anchors: each source sample's marginal argmax target, where it lies within
+    ``p.mass_radius`` of the map's image of the sample; each vertex is trilaterated
+    against its ``p.refine_anchors`` nearest anchored samples, and keeps its image where
+    that keeps the distances to within ``tolerance`` target spacings.
+
+    Parameters
+    ----------
+    surface : Surface
+    ps, pt : (S,), (T,) int64
+        Working vertices of the source and target samples.
+    source_vertex : (S,) int64
+        Input vertex of every source sample.
+    marginals : (S, T) float array
+    vertex_map : (N_in,) int64
+        Image input vertex of every input vertex.
+    spacing : float
+        Target spacing (sqrt(area) units).
+    p : Params
+    tolerance : float
+        In target spacings (default ``REFINE_TOLERANCE``).
+
+    Returns
+    -------
+    (N_in,) int64
+    """
+    work = surface.vertex_map
+    anchors = np.asarray(pt, dtype=np.int64)[np.asarray(marginals).argmax(axis=1)]
+    keep = agreeing_anchors(surface.graph, anchors, work[vertex_map[source_vertex]], p.mass_radius)
+    image = trilaterate(
+        surface.graph,
+        work,
+        work[vertex_map],
+        np.asarray(ps, dtype=np.int64)[keep],
+        anchors[keep],
+        p.refine_anchors,
+        tolerance * spacing,
+        REFINE_REACH,
+    )
+    moved = image != work[vertex_map]
+    out = vertex_map.copy()
+    out[moved] = _input_images(surface, image[moved])
+    return out
 
 
 def best_spectral(

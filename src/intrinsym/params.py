@@ -40,6 +40,12 @@ CELL_RADIUS = 0.05
 #: (sqrt(area) units) of the extraction's image; beyond it, the plain fit's
 #: (:func:`intrinsym.globalmap.zoomout_map`).
 GUIDE_TOLERANCE = 0.05
+#: A vertex whose global-map image keeps its geodesic distances to the anchors of
+#: ``refine_anchors`` within this many target spacings (root mean square) keeps it
+#: (:func:`intrinsym.refine.trilaterate`; measured in docs/results.md).
+REFINE_TOLERANCE = 2.0
+#: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
+REFINE_REACH = 0.3
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
@@ -271,6 +277,15 @@ class Params:
         unit=AREA,
         self_match=True,
     )
+    refine_anchors: int = _p(
+        20,
+        "move each vertex's global-map image to where its geodesic distances to this many "
+        "nearest source samples are best kept from the samples' marginal peaks (geodesic "
+        "trilateration); 0: no refinement",
+        "global map",
+        paper="off",
+        self_match=True,
+    )
     fallback_mass: float = _p(
         0.6,
         "below this kept marginal mass of the chosen global map, the spectral baseline's "
@@ -296,6 +311,7 @@ class Params:
             (self.source_spacing is not None and self.source_spacing <= 0, "source_spacing must be positive"),
             (self.target_spacing is not None and self.target_spacing <= 0, "target_spacing must be positive"),
             (self.seed < 0, "seed must be at least 0"),
+            (self.refine_anchors < 0, "refine_anchors must be at least 0"),
             (not 2 <= self.spin_bins <= MAX_SPIN_BINS, f"spin_bins must lie in [2, {MAX_SPIN_BINS}]"),
             (not 1 <= self.spin_cloud <= MAX_SPIN_CLOUD, f"spin_cloud must lie in [1, {MAX_SPIN_CLOUD}]"),
             (self.spin_radius <= 0, "spin_radius must be positive"),
@@ -383,6 +399,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         unary_seeds=False,
         vertex_fit=0.0,
         zoomout=False,
+        refine_anchors=0,
         passes=1,
         trivial_weight=0.0,
     ),

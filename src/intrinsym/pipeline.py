@@ -336,6 +336,7 @@ def _solve(
             support,
             None if spectra is None else spectra[0],
             fit,
+            t_spacing,
             p,
         )
         clock.lap("global_map")
@@ -365,7 +366,9 @@ def _solve(
         seconds=clock.seconds,
         bp=_bp_stats(outcome.runs),
         identity=outcome.identity,
-        global_map=None if chosen is None else GlobalMapStats(chosen.source, chosen.mass, chosen.masses),
+        global_map=None
+        if chosen is None
+        else GlobalMapStats(chosen.source, chosen.mass, chosen.masses, chosen.refined),
         versions=versions(),
     )
     return Result(

@@ -163,11 +163,15 @@ class GlobalMapStats:
         not a calibrated probability).
     masses : dict of str to float
         Kept mass of every candidate tried.
+    refined : float
+        Share of the input vertices whose image the trilateration moved
+        (:func:`intrinsym.refine.trilaterate`; 0 without it).
     """
 
     source: str
     mass: float
     masses: dict[str, float] = field(default_factory=dict)
+    refined: float = 0.0
 
 
 @dataclass(frozen=True)
