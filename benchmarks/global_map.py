@@ -45,10 +45,10 @@ from intrinsym import evaluate, geodesics, shapes, unary
 from intrinsym.confidence import calibration, map_mass, mass_within, sample_images
 from intrinsym.extract import Symmetry, consistency
 from intrinsym.globalmap import best_spectral, cell_mass, choose, zoomout_map
-from intrinsym.pipeline import _min_vertices, extract_result
+from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
 from intrinsym.shape import Shape, clean, surface_area
 from intrinsym.support import SourceGraph
-from intrinsym.surface import prepare, sample
+from intrinsym.surface import prepare
 from tosca import cases
 
 CANDIDATES = ("extraction", "zoomout", "spectral")
@@ -188,8 +188,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     argmax = result.marginals.argmax(axis=1)
     row["argmax_share"] = consistency(argmax, graph, targets, tolerance)
     surf = prepare(mesh, _min_vertices(p))
-    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
-    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
+    ps, pt = sample_pair(surf, surf, p)
     row["long_range"] = long_range_agreement(surf.graph, ps, pt[argmax])
     sym = extraction.global_symmetry
     row["global"] = sym is not None

@@ -29,8 +29,8 @@ import intrinsym
 from _data import add_data_argument, data_folder, no_data
 from intrinsym import evaluate
 from intrinsym.globalmap import refined_map
-from intrinsym.pipeline import _min_vertices, extract_result
-from intrinsym.surface import prepare, sample
+from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
+from intrinsym.surface import prepare
 from tosca import cases
 
 
@@ -59,8 +59,7 @@ def measure(case, saved: Path, settings: list[tuple[int, float]]) -> dict | None
         return None
     p = result.params
     surf = prepare(mesh, _min_vertices(p))
-    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
-    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
+    ps, pt = sample_pair(surf, surf, p)
     spacing = result.info.resolved.target_spacing
     row: dict = {"shape": case.name, "before": _scores(start, mesh, truth)}
     for k, tol in settings:

@@ -4,6 +4,7 @@ run from many sources in parallel threads (used by :mod:`intrinsym.geodesics`)."
 from __future__ import annotations
 
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numba as nb
 import numpy as np
@@ -345,3 +346,24 @@ def split(n: int, n_parts: int) -> list[tuple[int, int]]:
     """Contiguous [lo, hi) ranges covering range(n) in about n_parts pieces."""
     bounds = np.linspace(0, n, max(1, min(n, n_parts)) + 1).astype(np.int64)
     return [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+def balls(
+    indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray, sources: np.ndarray, label: np.ndarray, limit: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`ball_rows` from every source, the sources split over Numba's threads.
+
+    Returns
+    -------
+    counts, cols, dists
+        As :func:`ball_rows` returns them for all of ``sources`` in order.
+    """
+    ranges = split(len(sources), 8 * n_workers())
+    with ThreadPoolExecutor(n_workers()) as pool:
+        parts = list(
+            pool.map(lambda r: ball_rows(indptr, indices, weights, sources[r[0] : r[1]], label, limit), ranges)
+        )
+    if not parts:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float64)
+    counts, cols, dists = zip(*parts, strict=True)
+    return np.concatenate(counts), np.concatenate(cols), np.concatenate(dists)

@@ -23,7 +23,7 @@ from scipy.spatial.distance import cdist
 from . import bp, descriptors, example_path, model, pipeline, sampling, unary
 from .params import OFFSET_TARGETS, Params
 from .progress import BPIteration, ProgressEvent, StageDone
-from .surface import as_shape, prepare, sample
+from .surface import as_shape, prepare
 
 
 @dataclass(frozen=True)
@@ -325,8 +325,7 @@ def descriptor_steps(mesh: str, p: Params) -> tuple[int, dict[str, float]]:
         return out
 
     surf = prepare(as_shape(mesh), pipeline._min_vertices(p))
-    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
-    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
+    ps, pt = pipeline.sample_pair(surf, surf, p)
     v, f = surf.shape.vertices, surf.shape.faces
     timed("laplacian", descriptors.laplace_beltrami, v, f)
     evals, evecs = timed("eigenpairs", descriptors.eigenpairs, v, f, min(p.eigenpairs, len(v) - 1))

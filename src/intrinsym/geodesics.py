@@ -21,7 +21,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from ._dijkstra import ball_rows, csr_arrays, n_workers, pair_block, split, symmetrize_rows
+from ._dijkstra import balls, csr_arrays, n_workers, pair_block, split, symmetrize_rows
 
 __all__ = [
     "SparseDistances",
@@ -399,19 +399,9 @@ def local_distances(graph: sp.spmatrix, points: np.ndarray, radius: float) -> Sp
     label[pts] = np.arange(len(pts))
     if len(np.unique(pts)) != len(pts):
         raise ValueError("points must be distinct vertices")
-    ranges = split(len(pts), 8 * n_workers())
-    with ThreadPoolExecutor(n_workers()) as pool:
-        parts = list(
-            pool.map(
-                lambda r: ball_rows(indptr, indices, weights, pts[r[0] : r[1]], label, float(radius)),
-                ranges,
-            )
-        )
-    counts = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
+    counts, cols, dists = balls(indptr, indices, weights, pts, label, float(radius))
     row_ptr = np.zeros(len(pts) + 1, dtype=np.int64)
     np.cumsum(counts, out=row_ptr[1:])
-    cols = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
-    dists = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0, np.float64)
     row_ptr, cols, dists = symmetrize_rows(row_ptr, cols, dists)
     return SparseDistances(row_ptr, cols, dists, float(radius))
 

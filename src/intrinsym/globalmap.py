@@ -300,19 +300,20 @@ def refined_map(
     (N_in,) int64
     """
     work = surface.vertex_map
+    start = work[vertex_map]
     anchors = np.asarray(pt, dtype=np.int64)[np.asarray(marginals).argmax(axis=1)]
-    keep = agreeing_anchors(surface.graph, anchors, work[vertex_map[source_vertex]], p.mass_radius)
+    keep = agreeing_anchors(surface.graph, anchors, start[source_vertex], p.mass_radius)
     image = trilaterate(
         surface.graph,
         work,
-        work[vertex_map],
+        start,
         np.asarray(ps, dtype=np.int64)[keep],
         anchors[keep],
         p.refine_anchors,
         tolerance * spacing,
         REFINE_REACH,
     )
-    moved = image != work[vertex_map]
+    moved = image != start
     out = vertex_map.copy()
     out[moved] = _input_images(surface, image[moved])
     return out

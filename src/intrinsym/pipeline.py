@@ -410,6 +410,12 @@ def _min_vertices(p: Params) -> int:
     return 3 * max(p.n_source or 0, p.n_target or 0)
 
 
+def sample_pair(src: Surface, tgt: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Working vertices of the source samples (on ``src``, seed ``p.seed + 1``) and of the
+    target samples (on ``tgt``, seed ``p.seed``): those of a run with parameters ``p``."""
+    return sample(src, p.n_source, p.source_spacing, p.seed + 1), sample(tgt, p.n_target, p.target_spacing, p.seed)
+
+
 def detect(
     shape: ShapeLike,
     params: Params | None = None,
@@ -447,8 +453,7 @@ def detect(
     clock.lap("load")
     surf = prepare(s, _min_vertices(p))
     clock.lap("prepare")
-    pt = sample(surf, p.n_target, p.target_spacing, p.seed)
-    ps = sample(surf, p.n_source, p.source_spacing, p.seed + 1)
+    ps, pt = sample_pair(surf, surf, p)
     clock.lap("sampling")
     return _solve(surf, surf, ps, pt, p, clock, True, {"mode": "detect", "input": str(s.path), "preset": preset})
 
@@ -478,8 +483,7 @@ def match(
     surf_a = prepare(sa, _min_vertices(p))
     surf_b = prepare(sb, _min_vertices(p))
     clock.lap("prepare")
-    pt = sample(surf_b, p.n_target, p.target_spacing, p.seed)
-    ps = sample(surf_a, p.n_source, p.source_spacing, p.seed + 1)
+    ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")
     header = {"mode": "match", "input": str(sa.path), "target_input": str(sb.path), "preset": preset}
     return _solve(surf_a, surf_b, ps, pt, p, clock, False, header)

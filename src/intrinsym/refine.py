@@ -22,13 +22,11 @@ only where they agree with the symmetry it chose.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
-from ._dijkstra import ball_rows, csr_arrays, n_workers, split
+from ._dijkstra import balls, csr_arrays
 from .geodesics import pair_distances
 
 __all__ = ["agreeing_anchors", "trilaterate"]
@@ -40,26 +38,17 @@ MAX_STEPS = 200
 def _balls(
     graph: tuple[np.ndarray, np.ndarray, np.ndarray], sources: np.ndarray, limit: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Graph-geodesic distances from ``sources`` up to ``limit``, as sparse rows.
-
-    Radius-limited Dijkstra (:func:`intrinsym._dijkstra.ball_rows`) on Numba's threads
-    (SciPy's ``dijkstra`` holds the GIL and fills every row to the graph's size).
+    """Graph-geodesic distances from ``sources`` up to ``limit``, as sparse rows
+    (:func:`intrinsym._dijkstra.balls`: radius-limited Dijkstra on Numba's threads;
+    SciPy's ``dijkstra`` holds the GIL and fills every row to the graph's size).
 
     Returns
     -------
     rows, cols, dists : (nnz,) int64, int64, float64
         Source index, vertex and distance of every vertex within ``limit`` of a source.
     """
-    indptr, indices, weights = graph
-    label = np.arange(len(indptr) - 1, dtype=np.int64)
-    ranges = split(len(sources), 4 * n_workers())
-    with ThreadPoolExecutor(n_workers()) as pool:
-        parts = list(
-            pool.map(lambda r: ball_rows(indptr, indices, weights, sources[r[0] : r[1]], label, limit), ranges)
-        )
-    counts = np.concatenate([c for c, _, _ in parts])
-    rows = np.repeat(np.arange(len(sources)), counts)
-    return rows, np.concatenate([c for _, c, _ in parts]), np.concatenate([d for _, _, d in parts])
+    counts, cols, dists = balls(*graph, sources, np.arange(len(graph[0]) - 1, dtype=np.int64), limit)
+    return np.repeat(np.arange(len(sources)), counts), cols, dists
 
 
 @nb.njit(cache=True)
