@@ -352,6 +352,14 @@ def run_figure(report: Report, sizes: tuple[int, int], cache: Path | None, overr
     check_segmentation(report, shape.name, result, shape, shape)
 
 
+def _decision(identity) -> str:
+    """The identity decision of ``auto`` in words: the weight and both statistics."""
+    if identity is None:
+        return "None"
+    share, returned = (np.nan if v is None else v for v in (identity.isometry, identity.involution))
+    return f"{identity.weight} ({share:.2f} < {identity.threshold}, {returned:.2f} < {identity.involution_threshold})"
+
+
 def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
     """The partial symmetry: limb points peak on the other limb, off-limb points
     on nothing (no invented self-map of the body, no global symmetry extracted)."""
@@ -365,14 +373,10 @@ def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, over
         )
         summary(report, name, result, seconds)
         identity = result.info.identity
-        weight, isometry, threshold = (
-            (identity.weight, identity.isometry, identity.threshold) if identity is not None else (None, None, None)
-        )
         report.add(
             name,
-            "trivial weight (auto: argmax edges kept)",
-            f"{result.params.trivial_weight} -> {weight} ({np.nan if isometry is None else isometry:.2f}"
-            f" < {threshold})",
+            "trivial weight (auto: argmax edges kept, samples returned)",
+            f"{result.params.trivial_weight} -> {_decision(identity)}",
             None,
         )
         scores = {

@@ -9,17 +9,18 @@ ground-truth symmetry:
   map (all poses; gorilla has no map and is left out);
 * ``kids_sym/0001.isometry.1.off`` with ``kids_sym/sym.txt`` (row ``kids``);
 * the meshes posed nearly mirror-symmetrically that have no symmetry file, the SCAPE
-  template (``scape``), ``homer`` and ``cow``: their ground truth is their best
-  reflection (:func:`intrinsym.evaluate.extrinsic_mirror`), and the row records that
-  reflection's median residual (units of sqrt(area)).
+  template (``scape``), ``homer``, ``cow`` and ``spot`` (the shipped example): their
+  ground truth is their best reflection (:func:`intrinsym.evaluate.extrinsic_mirror`),
+  and the row records that reflection's median residual (units of sqrt(area)).
 
 Per shape it records the marginal scores of the unary and of BP
 (:func:`intrinsym.evaluate.score_marginals`: mirror hit, peak recall, decoy recall,
 breadth), the global symmetry map's fraction of vertices within 0.05 and 0.10 of the
 true image and its mean error (:func:`intrinsym.evaluate.score_map`, geodesic, units of
 sqrt(area); what ``intrinsym evaluate`` reports), whether a global symmetry was found,
-the global/partial decision and the statistic behind it (the share of source edges
-BP's argmax keeps, and whether the identity was kept as "no partner"), BP iterations,
+the global/partial decision and the statistics behind it (the share of source edges
+BP's argmax keeps, the share of source samples it returns to when applied twice, and
+whether the identity was kept as "no partner"), BP iterations,
 seconds per stage and in total (the wall time of the ``detect`` call), and the
 baseline's map scores and seconds (``spectral_symmetry`` alone). Command::
 
@@ -72,11 +73,18 @@ import intrinsym
 from intrinsym import evaluate, geodesics, spectral
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
-REFLECTION = {"scape": "scape/mesh000.off", "homer": "static/homer.obj", "cow": "static/cow.obj"}
+REFLECTION = {
+    "scape": "scape/mesh000.off",
+    "homer": "static/homer.obj",
+    "cow": "static/cow.obj",
+    "spot": "static/spot.obj",
+}
 #: Class of the reflection-scored meshes in the per-class summary.
 REFLECTION_CLASS = "reflection"
 #: Marginal scores shown in the table (``score_marginals`` also gives breadth, kept in JSON).
 MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
+#: The involution statistic in the summary's words.
+_INVOLUTION = "share of source samples BP's argmax, applied twice, returns to within 0.1"
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 3
 
@@ -167,15 +175,18 @@ def decision(info) -> dict:
     """
     record = field(info, "identity") or field(info, "decision")
     if record is None:
-        return {"statistic": None, "threshold": None, "identity_kept": None}
+        return {"statistic": None, "threshold": None, "involution": None, "identity_kept": None}
     statistic = field(record, "isometry", default=field(record, "statistic"))
     kept = field(record, "identity_kept", default=field(record, "kept"))
     if kept is None:
         weight = field(record, "weight")
         kept = None if weight is None else float(weight) > 0
+    involution = field(record, "involution")
     return {
         "statistic": None if statistic is None else float(statistic),
         "threshold": field(record, "threshold"),
+        "involution": None if involution is None else float(involution),
+        "involution_threshold": field(record, "involution_threshold"),
         "identity_kept": None if kept is None else bool(kept),
     }
 
@@ -393,6 +404,7 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
         ("map mean error", ("map", "mean_error"), False, ".4f"),
         ("global found", ("global_found",), True, "bool"),
         ("identity share", ("decision", "statistic"), True, ".3f"),
+        ("involution", ("decision", "involution"), True, ".3f"),
         ("identity kept", ("decision", "identity_kept"), False, "bool"),
         ("BP it.", ("bp_iterations",), False, "d"),
         ("spectral ≤0.05", ("spectral", "within_0.05"), True, ".3f"),
@@ -484,17 +496,20 @@ def markdown(rows: list[dict], show_stages: bool = False) -> str:
             lines.append(f"| {cls} worst | " + " | ".join(worsts) + " |")
         out.append("Per class:\n\n" + "\n".join(lines))
 
-    stats = sorted((r["decision"]["statistic"], r["shape"]) for r in ok if _get(r, "decision", "statistic") is not None)
-    if stats:
-        threshold = next((_get(r, "decision", "threshold") for r in ok if _get(r, "decision", "threshold")), None)
-        kept = [r["shape"] for r in ok if _get(r, "decision", "identity_kept")]
-        out.append(
-            "Decision statistic (share of source edges BP's argmax keeps"
-            + (f"; identity kept below {threshold}" if threshold is not None else "")
-            + "), sorted: "
-            + ", ".join(f"{name} {value:.3f}" for value, name in stats)
-            + f". Identity kept (judged partial): {', '.join(kept) if kept else 'none'}."
-        )
+    for key, what in (("statistic", "share of source edges BP's argmax keeps"), ("involution", _INVOLUTION)):
+        stats = sorted((_get(r, "decision", key), r["shape"]) for r in ok if _get(r, "decision", key) is not None)
+        if stats:
+            bound = "threshold" if key == "statistic" else "involution_threshold"
+            threshold = next((_get(r, "decision", bound) for r in ok if _get(r, "decision", bound)), None)
+            out.append(
+                f"Decision statistic ({what}"
+                + (f"; threshold {threshold}" if threshold is not None else "")
+                + "), sorted: "
+                + ", ".join(f"{name} {value:.3f}" for value, name in stats)
+                + "."
+            )
+    kept = [r["shape"] for r in ok if _get(r, "decision", "identity_kept")]
+    out.append(f"Identity kept (judged partial): {', '.join(kept) if kept else 'none'}.")
     behind = [(r["shape"], r["delta_0.10"]) for r in ok if r["delta_0.10"] is not None and r["delta_0.10"] < -0.01]
     out.append(
         "Shapes more than 0.01 below the spectral baseline within 0.10: "

@@ -138,6 +138,7 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     removed = spot_result  # the default ("auto") removes it: spot's mirror is a near-isometry
     identity = removed.info.identity
     assert identity.weight == 0.0 and identity.isometry >= identity.threshold, identity
+    assert identity.involution >= identity.involution_threshold, identity  # a reflection: its own inverse
     weighted = intrinsym.detect(spot, intrinsym.make_params(trivial_weight=0.7, **SMALL))
     assert np.array_equal(kept.target_point_vertex, removed.target_point_vertex)
     floor = np.float32(removed.info.resolved.unary_floor)

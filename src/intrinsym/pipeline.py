@@ -21,9 +21,9 @@ import numpy as np
 
 from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
-from .extract import Extraction, consistency, extract_from_support
+from .extract import Extraction, consistency, extract_from_support, involution
 from .globalmap import choose_global_map
-from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, Params, make_params
+from .params import INVOLUTION_RADIUS, NO_PARTNER_WEIGHT, OFFSET_TARGETS, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
 from .result import Result
 from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
@@ -259,6 +259,8 @@ def decide_identity(
     outcome: BPOutcome,
     p: Params,
     t_spacing: float,
+    source_points: np.ndarray,
+    target_points: np.ndarray,
 ) -> IdentityDecision:
     """The decision of ``trivial_weight="auto"`` on an identity-removed BP outcome: the
     weight the trivial match gets (0: a global symmetry, ``NO_PARTNER_WEIGHT``: partial).
@@ -266,13 +268,23 @@ def decide_identity(
     With the identity removed every row puts its mass somewhere, and on a shape without a
     global symmetry BP invents a self-map that keeps short distances only roughly; a true,
     posed symmetry's argmax keeps nearly all of them (within ``d_error`` or the target
-    spacing ``t_spacing``).
+    spacing ``t_spacing``). Where the unary is weak (strongly posed shapes) it keeps
+    fewer, but a reflection's argmax still returns most samples to themselves when applied
+    twice, which an invented self-map does not: either test makes the symmetry global.
     """
+    image = outcome.marginals.argmax(axis=1)
     graph = SourceGraph.from_edges(edges, edge_length, len(outcome.marginals))
-    kept = consistency(outcome.marginals.argmax(axis=1), graph, pair.targets, max(p.d_error, t_spacing))
-    if kept >= p.isometry_threshold:
-        return IdentityDecision(0.0, kept, p.isometry_threshold)
-    return IdentityDecision(NO_PARTNER_WEIGHT, kept, p.isometry_threshold, outcome.runs[0].iterations)
+    kept = consistency(image, graph, pair.targets, max(p.d_error, t_spacing))
+    returned = involution(image, source_points, target_points, INVOLUTION_RADIUS)
+    partial = kept < p.isometry_threshold and returned < p.involution_threshold
+    return IdentityDecision(
+        NO_PARTNER_WEIGHT if partial else 0.0,
+        kept,
+        p.isometry_threshold,
+        outcome.runs[0].iterations if partial else None,
+        returned,
+        p.involution_threshold,
+    )
 
 
 def _bp_stats(runs: list[bp.BPResult]) -> BPStats:
@@ -309,7 +321,8 @@ def _solve(
     clock.lap("unary")
     outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
     if outcome.identity is not None and p.trivial_weight == "auto":
-        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing)
+        points = src.shape.vertices[ps], tgt.shape.vertices[pt]
+        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, *points)
         if identity.weight > 0:
             outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
         outcome = dataclasses.replace(outcome, identity=identity)

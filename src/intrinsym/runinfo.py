@@ -126,12 +126,19 @@ class IdentityDecision:
         The threshold it was compared with.
     removed_iterations : int or None
         BP iterations of the run with the identity removed, when BP ran again with it kept.
+    involution : float or None
+        With ``trivial_weight="auto"``: the share of source samples BP's argmax, applied
+        twice, returned to (:func:`intrinsym.extract.involution`).
+    involution_threshold : float or None
+        The threshold it was compared with.
     """
 
     weight: float
     isometry: float | None = None
     threshold: float | None = None
     removed_iterations: int | None = None
+    involution: float | None = None
+    involution_threshold: float | None = None
 
 
 @dataclass(frozen=True)
