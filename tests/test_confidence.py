@@ -36,3 +36,34 @@ def test_score_weighs_the_mass_by_agreement():
     mass = np.array([0.8, 0.8, 0.8, 0.8, 0.5])
     apart = np.array([0.0, r / 4, r, 2 * r, np.nan])
     assert confidence.score(mass, apart) == pytest.approx([0.8, 0.6, 0.0, 0.0, 0.5])
+
+
+def test_round_trip_by_hand():
+    # four vertices on a line, the reflection x -> -x: every trip returns
+    vertices = np.array([[-3.0, 0, 0], [-1, 0, 0], [1, 0, 0], [3, 0, 0]])
+    mirror = np.array([3, 2, 1, 0])
+    assert confidence.round_trip(vertices, mirror, scale=1.0) == pytest.approx(np.zeros(4))
+    # vertex 0 sent to vertex 2 instead: its trip ends at vertex 1 (2 away), and the trip
+    # of vertex 3, whose image is vertex 0, at vertex 2 (2 away)
+    wrong = np.array([2, 2, 1, 0])
+    trip = confidence.round_trip(vertices, wrong, scale=10.0)
+    assert trip == pytest.approx([0.2, 0.0, 0.0, 0.2])
+    # no image: no trip
+    assert np.isnan(confidence.round_trip(vertices, np.array([-1, 2, 1, 0]), scale=1.0)[[0, 3]]).all()
+
+
+def test_round_trip_ignores_a_rotation_of_order_three():
+    angle = 2 * np.pi * np.arange(30) / 30
+    vertices = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(30)])
+    third = (np.arange(30) + 10) % 30  # twice: a rotation by 240 degrees, no vertex returns
+    assert np.isnan(confidence.round_trip(vertices, third, scale=1.0)).all()
+    # a reflection of the same vertices returns every one
+    assert confidence.round_trip(vertices, (30 - np.arange(30)) % 30, scale=1.0) == pytest.approx(np.zeros(30))
+
+
+def test_score_weighs_the_mass_by_the_round_trip():
+    r = confidence.DISAGREEMENT_RANGE
+    mass = np.full(4, 0.8)
+    apart = np.array([0.0, r / 4, 0.0, np.nan])
+    trip = np.array([r / 2, r / 4, np.nan, 2 * r])
+    assert confidence.score(mass, apart, trip) == pytest.approx([0.4, 0.45, 0.8, 0.0])

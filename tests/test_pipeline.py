@@ -92,10 +92,11 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     assert conf.shape == (len(spot.vertices),) and conf.dtype == np.float32 and 0 <= conf.min() <= conf.max() <= 1
     calibrated = np.load(out / "symmetry_confidence.npy")
     assert calibrated.dtype == np.float32 and calibrated.shape == conf.shape
-    apart = confidence.disagreement(
-        spot.vertices, r.symmetry_map(), r.extraction_map(), np.sqrt(surface_area(spot))
-    )  # the chosen map against the extraction's own
-    expected = confidence.calibrated(confidence.score(conf, apart))
+    scale = np.sqrt(surface_area(spot))
+    apart = confidence.disagreement(spot.vertices, r.symmetry_map(), r.extraction_map(), scale)  # vs the extraction
+    trip = confidence.round_trip(spot.vertices, r.symmetry_map(), scale)  # spot's mirror: its own inverse
+    assert np.mean(trip < confidence.DISAGREEMENT_RANGE) > 0.9
+    expected = confidence.calibrated(confidence.score(conf, apart, trip))
     assert np.allclose(calibrated, np.where(r.symmetry_map() >= 0, expected, 0), atol=1e-5)
     assert r.global_confidence() == pytest.approx(float(calibrated.mean()))
     # the global confidence is the samples' mean confidence

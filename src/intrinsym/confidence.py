@@ -35,6 +35,7 @@ __all__ = [
     "kept_mass",
     "map_mass",
     "mass_within",
+    "round_trip",
     "sample_images",
     "score",
     "vertex_confidence",
@@ -46,14 +47,19 @@ __all__ = [
 #: bin's centre), fitted (isotonic) over the TOSCA poses, KIDS and the mirror-posed scans
 #: by ``benchmarks/calibration.py``; docs/results.md checks it one held-out class at a time.
 CALIBRATION = (
-    0.525, 0.739, 0.760, 0.760, 0.760, 0.760, 0.760, 0.794, 0.794, 0.809,
-    0.837, 0.888, 0.914, 0.923, 0.923, 0.954, 0.961, 0.973, 0.974, 0.974,
+    0.515, 0.713, 0.713, 0.713, 0.713, 0.713, 0.771, 0.807, 0.861, 0.905,
+    0.923, 0.951, 0.962, 0.981, 0.990, 0.993, 0.995, 0.998, 0.998, 1.000,
 )  # fmt: skip
 
 
 #: Two global maps (the chosen one and the extraction's) placing a vertex's image this far
 #: apart (units of sqrt(area)) leave it no score: one of them is off by half of it at least.
 DISAGREEMENT_RANGE = 0.10
+#: :func:`round_trip` weighs a map only when at least this share of the vertices return
+#: within ``DISAGREEMENT_RANGE`` under it (0.73-1.00 on the global maps of the 11 TOSCA
+#: poses checked in docs/results.md; a rotation of order three returns only the vertices
+#: near its axis).
+INVOLUTIVE_SHARE = 0.5
 
 
 def disagreement(vertices: np.ndarray, first: np.ndarray, second: np.ndarray, scale: float) -> np.ndarray:
@@ -79,15 +85,52 @@ def disagreement(vertices: np.ndarray, first: np.ndarray, second: np.ndarray, sc
     return np.where((a >= 0) & (b >= 0), d, np.nan)
 
 
-def score(mass: np.ndarray, apart: np.ndarray) -> np.ndarray:
+def round_trip(vertices: np.ndarray, image: np.ndarray, scale: float) -> np.ndarray:
+    """Straight-line distance from each vertex to its image's image, where the map is a
+    reflection.
+
+    A reflection is its own inverse, so a vertex whose image's image lies ``r`` from it
+    has an image (or an image's image) off by ``r / 2`` at least. A map that fewer than
+    ``INVOLUTIVE_SHARE`` of the vertices return under within ``DISAGREEMENT_RANGE`` is
+    taken for a rotation of higher order, and says nothing.
+
+    Parameters
+    ----------
+    vertices : (N, 3) float array
+        Positions (self-matching: the map takes the vertices to themselves).
+    image : (N,) int array
+        Image of every vertex, -1 for none.
+    scale : float
+        Length unit of the result (sqrt(area) of the shape).
+
+    Returns
+    -------
+    (N,) float64
+        ``|vertices[image[image]] - vertices| / scale``; nan where either step has no
+        image, and everywhere when the map is no reflection.
+    """
+    a = np.asarray(image, dtype=np.int64)
+    v = np.asarray(vertices, dtype=np.float64)
+    twice = np.where(a >= 0, a[np.maximum(a, 0)], -1)
+    d = disagreement(v, twice, np.arange(len(v)), scale)
+    if not np.mean(d < DISAGREEMENT_RANGE) >= INVOLUTIVE_SHARE:
+        return np.full(len(v), np.nan)
+    return d
+
+
+def score(mass: np.ndarray, apart: np.ndarray, trip: np.ndarray | None = None) -> np.ndarray:
     """Per-vertex score in [0, 1] that :func:`calibrated` turns into a probability: the
     marginal mass (:func:`map_mass`, how far the model supports the image) times
     ``1 - apart / DISAGREEMENT_RANGE`` clipped to [0, 1] (how far two maps agree on it;
     ``apart``: :func:`disagreement`, nan where the second map has no image: the mass
-    alone)."""
-    apart = np.nan_to_num(np.asarray(apart, dtype=np.float64), nan=0.0)
-    agree = np.clip(1.0 - apart / DISAGREEMENT_RANGE, 0.0, 1.0)
-    return np.asarray(mass, dtype=np.float64) * agree
+    alone), times ``1 - trip / DISAGREEMENT_RANGE`` clipped likewise (how far the map
+    returns the vertex to itself; ``trip``: :func:`round_trip`, nan: no factor)."""
+    factor = np.asarray(mass, dtype=np.float64).copy()
+    for d in (apart, trip):
+        if d is not None:
+            d = np.nan_to_num(np.asarray(d, dtype=np.float64), nan=0.0)
+            factor *= np.clip(1.0 - d / DISAGREEMENT_RANGE, 0.0, 1.0)
+    return factor
 
 
 def calibrated(mass: np.ndarray) -> np.ndarray:

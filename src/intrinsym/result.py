@@ -19,7 +19,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
-from .confidence import calibrated, disagreement, map_mass, score
+from .confidence import calibrated, disagreement, map_mass, round_trip, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, write_set
@@ -196,13 +196,15 @@ class Result:
     def symmetry_score(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float64 in [0, 1]: per input vertex, :meth:`symmetry_mass` (or
         ``mass``) weighed by how far the symmetry map and the extraction's own map agree
-        on its image (:func:`intrinsym.confidence.score`); uncalibrated."""
+        on its image and, for a reflection, how far the map applied twice returns it
+        (:func:`intrinsym.confidence.score`); uncalibrated."""
         mass = self.symmetry_mass() if mass is None else mass
         images = None if self.support is None else self.support.target_mesh_vertices
         if images is None or self.zoomout_map is None:
             return np.asarray(mass, dtype=np.float64)
-        apart = disagreement(images, self.symmetry_map(), self.extraction_map(), self.info.resolved.scale)
-        return score(mass, apart)
+        image, scale = self.symmetry_map(), self.info.resolved.scale
+        apart = disagreement(images, image, self.extraction_map(), scale)
+        return score(mass, apart, round_trip(images, image, scale))
 
     def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image
