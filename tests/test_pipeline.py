@@ -193,6 +193,8 @@ def test_paper_preset():
     for bad in (-0.1, 1.5):
         with pytest.raises(intrinsym.ParameterError, match="isometry_threshold"):
             intrinsym.params.make_params(isometry_threshold=bad)
+        with pytest.raises(intrinsym.ParameterError, match="involution_threshold"):
+            intrinsym.params.make_params(involution_threshold=bad)
 
 
 def test_point_cloud_input(spot):
