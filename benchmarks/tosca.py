@@ -71,6 +71,7 @@ import numpy as np
 
 import intrinsym
 from intrinsym import evaluate, geodesics, spectral
+from intrinsym.params import INVOLUTION_RADIUS
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
 REFLECTION = {
@@ -84,7 +85,7 @@ REFLECTION_CLASS = "reflection"
 #: Marginal scores shown in the table (``score_marginals`` also gives breadth, kept in JSON).
 MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
 #: The involution statistic in the summary's words.
-_INVOLUTION = "share of source samples BP's argmax, applied twice, returns to within 0.1"
+_INVOLUTION = f"share of source samples BP's argmax, applied twice, returns to within {INVOLUTION_RADIUS}"
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 3
 

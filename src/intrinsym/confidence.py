@@ -113,7 +113,7 @@ def round_trip(vertices: np.ndarray, image: np.ndarray, scale: float) -> np.ndar
     v = np.asarray(vertices, dtype=np.float64)
     twice = np.where(a >= 0, a[np.maximum(a, 0)], -1)
     d = disagreement(v, twice, np.arange(len(v)), scale)
-    if not np.mean(d < DISAGREEMENT_RANGE) >= INVOLUTIVE_SHARE:
+    if np.mean(d < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
         return np.full(len(v), np.nan)
     return d
 

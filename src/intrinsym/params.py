@@ -238,8 +238,8 @@ class Params:
     )
     involution_threshold: float = _p(
         0.78,
-        "share of source samples that BP's argmax, applied twice, returns to within 0.1 (a reflection "
-        "is its own inverse), from which --trivial-weight auto removes the identity whatever "
+        f"share of source samples that BP's argmax, applied twice, returns to within {INVOLUTION_RADIUS} "
+        "(a reflection is its own inverse), from which --trivial-weight auto removes the identity whatever "
         "--isometry-threshold says",
         "trivial match",
         self_match=True,

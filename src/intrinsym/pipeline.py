@@ -321,8 +321,8 @@ def _solve(
     clock.lap("unary")
     outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
     if outcome.identity is not None and p.trivial_weight == "auto":
-        points = src.shape.vertices[ps], tgt.shape.vertices[pt]
-        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, *points)
+        source_points, target_points = src.shape.vertices[ps], tgt.shape.vertices[pt]
+        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, source_points, target_points)
         if identity.weight > 0:
             outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
         outcome = dataclasses.replace(outcome, identity=identity)

@@ -37,7 +37,6 @@ if TYPE_CHECKING:  # matplotlib is imported where a figure is drawn: the CLI sta
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-#: Colours of the marginal heat map, low to high.
 HEAT = ("#2040d0", "#40c0f0", "#f0f0a0", "#f08030", "#d01010")
 """Blue (0) to red (1), the paper's colouring of a marginal."""
 
