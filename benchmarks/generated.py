@@ -54,7 +54,7 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import descriptors, evaluate, extract, geodesics, pipeline, shapes, spectral
+from intrinsym import evaluate, extract, geodesics, laplacian, pipeline, shapes, spectral
 from intrinsym.shape import from_arrays, surface_area
 from intrinsym.vertex_maps import fitted_vertex_map
 
@@ -206,13 +206,13 @@ def vertex_maps(
     others by :func:`intrinsym.vertex_maps.fitted_vertex_map`.
     """
     params = result.extraction_params()
-    evecs = descriptors.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
+    evecs = laplacian.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
     other = (
         {}
         if source is target
         else dict(
             target_vertices=target.vertices,
-            target_evecs=descriptors.eigenpairs(target.vertices, target.faces, EIGENPAIRS)[1],
+            target_evecs=laplacian.eigenpairs(target.vertices, target.faces, EIGENPAIRS)[1],
         )
     )
     maps = []

@@ -12,7 +12,7 @@ shipped example; truth: its best reflection), ``cat1``, ``michael1`` (defaults 2
 4000) and ``michael1-elephant`` (271 / 12722). Command::
 
     OPENBLAS_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python benchmarks/speed.py --old ../base/src \\
-        [--data DATA] [--cases spot cat1 michael1 michael1-elephant]
+        [--data DATA] [--cases spot cat1 michael1 michael1-elephant] [--backend gpu] [--repeat N]
 
 Warm the Numba caches of both versions first (one small ``detect`` each), so that no run
 pays for compilation.
@@ -49,9 +49,12 @@ import json, resource, sys, time
 t0 = time.perf_counter()
 import numpy as np
 import intrinsym
-mesh, ns, nt, out = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+mesh, ns, nt, out, backend = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
 t1 = time.perf_counter()
-r = intrinsym.detect(mesh, n_source=ns, n_target=nt)
+if backend == "cpu":
+    r = intrinsym.detect(mesh, n_source=ns, n_target=nt)
+else:
+    r = intrinsym.detect(mesh, intrinsym.make_params(backend=backend), n_source=ns, n_target=nt)
 t2 = time.perf_counter()
 info = r.info
 if isinstance(info, dict):
@@ -70,14 +73,14 @@ print(json.dumps({"import": t1 - t0, "detect": t2 - t1, "seconds": seconds, "ite
 """
 
 
-def run_once(src: str | None, mesh: str, n_source: int, n_target: int, out: Path) -> dict:
+def run_once(src: str | None, mesh: str, n_source: int, n_target: int, out: Path, backend: str = "cpu") -> dict:
     """One ``detect`` in a fresh process; ``src`` first on PYTHONPATH (None: the installed version)."""
     env = dict(os.environ)
     if src is not None:
-        env["PYTHONPATH"] = src
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (src, env.get("PYTHONPATH")) if p)
     start = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-c", CHILD, mesh, str(n_source), str(n_target), str(out)],
+        [sys.executable, "-c", CHILD, mesh, str(n_source), str(n_target), str(out), backend],
         env=env,
         capture_output=True,
         text=True,
@@ -106,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--old", required=True, help="src folder of the old version")
     add_data_argument(parser)
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    parser.add_argument("--backend", choices=("cpu", "gpu"), default="cpu", help="BP backend of both versions")
+    parser.add_argument("--repeat", type=int, default=1, help="runs of each version per case, alternating")
     args = parser.parse_args(argv)
     data = data_folder(args.data)
     if data is None and any(CASES[c][0] is not None for c in args.cases):
@@ -121,10 +126,12 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 stem = Path(rel).stem.rstrip("0123456789")
                 sym = evaluate.load_symmetry_map(Path(mesh).with_name(f"{stem}.sym"), len(shape.vertices))
-            for version, src in (("old", args.old), ("new", None)):
-                out = Path(tmp) / f"{case}_{version}.npz"
-                row = run_once(src, mesh, n_source, n_target, out)
-                print(json.dumps({"case": case, "version": version, **row, **scores(out, shape, sym)}), flush=True)
+            for _ in range(args.repeat):
+                for version, src in (("old", args.old), ("new", None)):
+                    out = Path(tmp) / f"{case}_{version}.npz"
+                    row = run_once(src, mesh, n_source, n_target, out, args.backend)
+                    line = {"case": case, "version": version, "backend": args.backend, **row}
+                    print(json.dumps({**line, **scores(out, shape, sym)}), flush=True)
     return 0
 
 

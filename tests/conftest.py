@@ -36,6 +36,12 @@ def sphere_points(n: int, seed: int = 0, radius: float = 1.0) -> np.ndarray:
     return radius * p / np.linalg.norm(p, axis=1, keepdims=True)
 
 
+def unit_sphere(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and faces of an icosphere of unit area."""
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
+    return np.asarray(s.vertices) / np.sqrt(4 * np.pi), np.asarray(s.faces)
+
+
 def mirror_shape() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A bent ellipsoid whose only symmetry is the mirror x -> -x, with its vertex map.
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import descriptors, shapes
+from intrinsym import descriptors, laplacian, shapes
 from intrinsym.errors import ParameterError
 
 
@@ -18,7 +18,7 @@ def copies(shape: shapes.GeneratedShape, k: int) -> tuple[np.ndarray, np.ndarray
 @pytest.mark.parametrize("k", [2, 3])
 def test_spectral_signatures_finite_with_several_components(k):
     v, f = copies(shapes.star(arms=4, resolution=6), k)
-    evals, evecs = descriptors.eigenpairs(v, f, 12)
+    evals, evecs = laplacian.eigenpairs(v, f, 12)
     assert descriptors.constant_modes(evals) == k
     energies, sigma = descriptors.wks_energies(evals, 20)
     wks = descriptors.wave_kernel_signature(evals, evecs, energies, sigma)
@@ -31,7 +31,7 @@ def test_spectral_signatures_finite_with_several_components(k):
 
 def test_too_many_components_for_the_eigenpairs():
     v, f = copies(shapes.star(arms=4, resolution=6), 3)
-    evals, _ = descriptors.eigenpairs(v, f, 3)
+    evals, _ = laplacian.eigenpairs(v, f, 3)
     with pytest.raises(ParameterError, match="--eigenpairs"):
         descriptors.constant_modes(evals)
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from intrinsym import descriptors, pipeline
+from conftest import unit_sphere
+from intrinsym import pipeline
 from intrinsym.descriptors import (
-    eigenpairs,
     heat_kernel_signature,
     hks_times,
     nmi,
@@ -15,6 +15,7 @@ from intrinsym.descriptors import (
     wave_kernel_signature,
     wks_energies,
 )
+from intrinsym.laplacian import eigenpairs
 from intrinsym.shape import from_arrays
 
 
@@ -77,27 +78,11 @@ def test_nmi_matches_hand_computed_entropies():
     assert s[1] == pytest.approx((h1 + h2 - h12) / h12, rel=1e-6)
 
 
-def _unit_sphere(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    s = trimesh.creation.icosphere(subdivisions=subdivisions)
-    return np.asarray(s.vertices) / np.sqrt(4 * np.pi), np.asarray(s.faces)
-
-
-def test_sphere_eigenvalues_are_the_spherical_harmonic_ones():
-    v, f = _unit_sphere()
-    evals, evecs = eigenpairs(v, f, 16)
-    # Unit-area sphere, R^2 = 1 / (4 pi): lambda_l = l (l + 1) 4 pi with multiplicity 2l + 1.
-    expected = np.repeat([l * (l + 1) * 4 * np.pi for l in range(4)], [1, 3, 5, 7])
-    assert evals[0] == pytest.approx(0.0, abs=1e-8)
-    np.testing.assert_allclose(evals[1:], expected[1:], rtol=0.01)
-    mass = descriptors.laplace_beltrami(v, f)[1]
-    np.testing.assert_allclose(evecs.T @ mass @ evecs, np.eye(16), atol=1e-8)
-
-
 @pytest.mark.parametrize("signature", ["wks", "hks"])
 def test_spectral_signatures_are_constant_on_a_sphere(signature):
     # Every point of a sphere is equivalent; with whole eigenspaces (l <= 5: 36 modes)
     # the signatures cannot depend on the point, up to the mesh's discretisation.
-    v, f = _unit_sphere()
+    v, f = unit_sphere()
     evals, evecs = eigenpairs(v, f, 36)
     if signature == "wks":
         energies, sigma = wks_energies(evals, 50)
@@ -142,16 +127,3 @@ def test_signatures_are_scale_free_after_unit_area_normalisation(mirror):
         )
     for a, b in zip(*out, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-6)
-
-
-def test_point_cloud_spectrum_approximates_the_mesh_one():
-    v, f = _unit_sphere()
-    mesh_evals = eigenpairs(v, f, 9)[0]
-    cloud_evals = eigenpairs(v, None, 9)[0]
-    np.testing.assert_allclose(cloud_evals[1:], mesh_evals[1:], rtol=0.05)
-
-
-def test_eigenpairs_rejects_bad_k():
-    v, f = _unit_sphere(1)
-    with pytest.raises(ValueError, match="k must"):
-        eigenpairs(v, f, len(v))

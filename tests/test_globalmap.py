@@ -6,7 +6,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import intrinsym
-from intrinsym import descriptors, evaluate, shapes, spectral
+from intrinsym import evaluate, laplacian, shapes, spectral
 from intrinsym.extract import Symmetry
 from intrinsym.globalmap import zoomout_map
 from intrinsym.params import GUIDE_TOLERANCE
@@ -24,7 +24,7 @@ def _setup(v, f, sym):
     pt, ps = sample(surf, 600, None, 0), sample(surf, 60, None, 1)
     work = surf.shape.vertices
     pairs = Symmetry(np.arange(len(ps)), cKDTree(work[pt]).query(work[sym[ps]])[1], 1.0, 1.0, "global")
-    evecs = descriptors.eigenpairs(work, surf.shape.faces, 31)[1]
+    evecs = laplacian.eigenpairs(work, surf.shape.faces, 31)[1]
     return surf, ps, pt, pairs, evecs, cKDTree(work[ps]).query(work)[1]
 
 

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from intrinsym.descriptors import eigenpairs, wave_kernel_signature, wks_energies
+from intrinsym.descriptors import wave_kernel_signature, wks_energies
 from intrinsym.geodesics import SparseDistances
+from intrinsym.laplacian import eigenpairs
 from intrinsym.model import lambda_for_tolerance, pairwise_dense, suppress_peaks, suppress_trivial, truncation_width
 from intrinsym.unary import calibrated_potential, descriptor_scale, nmi_potential, potential_floor, row_scales
 

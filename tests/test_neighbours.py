@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from intrinsym import descriptors, neighbours, shapes
+from intrinsym import laplacian, neighbours, shapes
 
 
 def _exact(query, basis):
@@ -22,7 +22,7 @@ def test_a_functional_maps_point_map_matches_a_kd_tree():
     # eigenfunction rows of a star (a surface in 30 dimensions) under the functional map
     # of its rotation, fitted by least squares, plus noise: the case the clusters are for
     shape = shapes.star(arms=5, resolution=16)
-    _, evecs = descriptors.eigenpairs(shape.vertices, shape.faces, 31)
+    _, evecs = laplacian.eigenpairs(shape.vertices, shape.faces, 31)
     basis = evecs[:, 1:]
     C = np.linalg.lstsq(basis, basis[shape.symmetries[0]], rcond=None)[0]
     query = basis @ C + 0.02 * np.random.default_rng(1).normal(size=basis.shape)

@@ -59,10 +59,10 @@ def test_nearest_images_is_the_exact_nearest_neighbour():
 
 @pytest.mark.parametrize("involution", [False, True])
 def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror, involution):
-    from intrinsym import descriptors
+    from intrinsym import laplacian
 
     v, f, sym = mirror
-    _, evecs = descriptors.eigenpairs(v, f, 31)
+    _, evecs = laplacian.eigenpairs(v, f, 31)
     phi = evecs[:, 1:]
     samples = np.arange(0, len(v), 3)
     start = sym[samples].copy()
@@ -125,10 +125,10 @@ def test_spectral_symmetry_on_tosca_wolf():
 
 
 def test_seeded_symmetry_refines_sparse_noisy_pairs(mirror):
-    from intrinsym import descriptors
+    from intrinsym import laplacian
 
     v, f, sym = mirror
-    _, evecs = descriptors.eigenpairs(v, f, 31)
+    _, evecs = laplacian.eigenpairs(v, f, 31)
     rng = np.random.default_rng(7)
     source = np.arange(0, len(v), 40)
     # images only as precise as a sparse sampling (a random vertex within 0.1 of the
@@ -155,11 +155,11 @@ def test_seeded_symmetry_refines_sparse_noisy_pairs(mirror):
 
 def test_seeded_symmetry_keeps_the_seeded_one_of_several_symmetries():
     """On an ellipsoid with seven symmetries, the pairs pick which one comes out."""
-    from intrinsym import descriptors
+    from intrinsym import laplacian
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     v = sphere.vertices * [1.0, 1.6, 2.5]
-    _, evecs = descriptors.eigenpairs(v, sphere.faces, 31)
+    _, evecs = laplacian.eigenpairs(v, sphere.faces, 31)
     source = np.arange(0, len(v), 20)
     for flip in ([1, 0, 0], [0, 1, 0], [1, 1, 0], [1, 1, 1]):
         truth = cKDTree(v).query(v * (1 - 2 * np.array(flip)))[1]
@@ -171,15 +171,15 @@ def test_seeded_map_between_two_shapes_recovers_a_vertex_permutation(mirror):
     """Two-shape form: the second shape is the first, rotated, scaled by 2 and with its
     vertices shuffled; sparse pairs of its mirror seed the map, which must come out as
     the mirror composed with the shuffle."""
-    from intrinsym import descriptors
+    from intrinsym import laplacian
 
     v, f, sym = mirror
     rng = np.random.default_rng(3)
     order = rng.permutation(len(v))  # vertex i of the copy is vertex order[i] of v
     rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
     w, g = 2.0 * v[order] @ rot.T, np.argsort(order)[f]
-    _, ev = descriptors.eigenpairs(v, f, 31)
-    _, ew = descriptors.eigenpairs(w, g, 31)
+    _, ev = laplacian.eigenpairs(v, f, 31)
+    _, ew = laplacian.eigenpairs(w, g, 31)
     truth = np.argsort(order)[sym]  # vertex of the copy that is the mirror image of vertex i of v
     source = np.arange(0, len(v), 40)
     image = spectral.seeded_symmetry(

@@ -37,6 +37,7 @@ def test_paper_preset_keeps_the_papers_unary():
         (dict(calibration_k=0), "calibration_k"),
         (dict(calibration="median"), "calibration must"),
         (dict(eigenpairs=1), "eigenpairs"),
+        (dict(eigen_coarse=-1), "eigen_coarse"),
     ],
 )
 def test_bad_unary_parameters(bad, match):

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from . import bp, descriptors, example_path, model, pipeline, sampling, unary
+from . import bp, descriptors, example_path, laplacian, model, pipeline, sampling, unary
 from .params import OFFSET_TARGETS, Params
 from .progress import BPIteration, ProgressEvent, StageDone
 from .surface import as_shape, prepare
@@ -327,8 +327,8 @@ def descriptor_steps(mesh: str, p: Params) -> tuple[int, dict[str, float]]:
     surf = prepare(as_shape(mesh), pipeline._min_vertices(p))
     ps, pt = pipeline.sample_pair(surf, surf, p)
     v, f = surf.shape.vertices, surf.shape.faces
-    timed("laplacian", descriptors.laplace_beltrami, v, f)
-    evals, evecs = timed("eigenpairs", descriptors.eigenpairs, v, f, min(p.eigenpairs, len(v) - 1))
+    timed("laplacian", laplacian.laplace_beltrami, v, f)
+    evals, evecs = timed("eigenpairs", unary.spectrum, surf, p.eigenpairs, p.eigen_coarse)
 
     def wks() -> np.ndarray:
         energies, sigma = descriptors.wks_energies(evals, p.energies)

@@ -7,9 +7,9 @@ of those images, and the normalised mutual information between quantised images 
 the corrected form ``NMI' = NMI - 1 = (H1 + H2 - H12) / H12`` in ``[0, 1]`` (the
 paper's Eq. 2-4 give NMI in [1, 2]; Eq. 5 needs a similarity in [0, 1]).
 
-Beyond the paper, Laplace-Beltrami eigenpairs (robust Laplacian of Sharp & Crane
-2020) give the intrinsic, pose- and reflection-invariant wave- and heat-kernel
-signatures that the default unary (``wks*spin``) is built on.
+Beyond the paper, the Laplace-Beltrami eigenpairs of :mod:`intrinsym.laplacian` give
+the intrinsic, pose- and reflection-invariant wave- and heat-kernel signatures that the
+default unary (``wks*spin``) is built on.
 
 All functions take and return plain NumPy arrays; the hot loops are Numba kernels
 parallelised over query points (spin images) or source rows (NMI).
@@ -18,10 +18,7 @@ parallelised over query points (spin images) or source rows (NMI).
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from cholespy import CholeskySolverD, MatrixType
 from numba import njit, prange
-from scipy.sparse.linalg import LinearOperator, eigsh
 
 from .errors import ParameterError
 
@@ -391,85 +388,6 @@ def nmi(qa: np.ndarray, qb: np.ndarray, levels: int = 8) -> np.ndarray:
     return out
 
 
-def laplace_beltrami(vertices: np.ndarray, faces: np.ndarray | None = None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """Cotangent stiffness and lumped mass matrices of a mesh or a point cloud.
-
-    Uses the intrinsic-Delaunay "robust" Laplacian of Sharp & Crane (2020): for a mesh
-    it tolerates non-manifold and badly shaped triangles, and for a point cloud
-    (``faces`` None) it builds local tufted triangulations from 30 nearest neighbours.
-
-    Parameters
-    ----------
-    vertices : (N, 3) float array
-        Positions (length unit of the shape).
-    faces : (F, 3) int array or None
-        Triangles; None for a point cloud.
-
-    Returns
-    -------
-    stiffness : (N, N) scipy.sparse.csr_matrix
-        Symmetric positive semi-definite weak Laplacian (dimensionless).
-    mass : (N, N) scipy.sparse.csr_matrix
-        Diagonal lumped mass (area per vertex, length^2).
-    """
-    import robust_laplacian
-
-    v = np.ascontiguousarray(vertices, dtype=np.float64)
-    if faces is None:
-        stiffness, mass = robust_laplacian.point_cloud_laplacian(v)
-    else:
-        stiffness, mass = robust_laplacian.mesh_laplacian(v, np.ascontiguousarray(faces, dtype=np.int64))
-    return sp.csr_matrix(stiffness), sp.csr_matrix(mass)
-
-
-def eigenpairs(vertices: np.ndarray, faces: np.ndarray | None, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """The ``k`` smallest Laplace-Beltrami eigenpairs, ``L phi = lambda M phi``.
-
-    Solved by shift-invert Lanczos (ARPACK) about a small negative shift, which keeps
-    ``L - sigma M`` positive definite although ``L`` is singular; its solves use a sparse
-    Cholesky factor (cholespy, CHOLMOD's supernodal factorisation: 4x faster solves than
-    SuperLU's LU on TOSCA meshes). The start vector is fixed, so the result is
-    deterministic.
-
-    Parameters
-    ----------
-    vertices : (N, 3) float array
-    faces : (F, 3) int array or None
-        None for a point cloud.
-    k : int
-        Number of eigenpairs, 2 <= k < N.
-
-    Returns
-    -------
-    evals : (k,) float64
-        Eigenvalues in ascending order, in 1 / length^2 (the first is ~0).
-    evecs : (N, k) float64
-        M-orthonormal eigenfunctions (unit: 1 / length).
-    """
-    n = len(vertices)
-    if not 2 <= k < n:
-        raise ValueError(f"k must lie in [2, {n - 1}] for {n} points; got {k}")
-    stiffness, mass = laplace_beltrami(vertices, faces)
-    area = float(mass.sum())
-    # A shift of -1e-3 eigenvalues of the unit-area shape: far below the first non-zero
-    # eigenvalue (~25 for a unit-area sphere) yet enough to make the factorisation regular.
-    shift = -1e-3 / area
-    a = (stiffness - shift * mass).tocoo()
-    factor = CholeskySolverD(n, a.row.astype(np.int32), a.col.astype(np.int32), a.data, MatrixType.COO)
-
-    def solve(b: np.ndarray) -> np.ndarray:
-        x = np.empty(n)
-        factor.solve(np.ascontiguousarray(b, dtype=np.float64).reshape(n), x)
-        return x
-
-    inverse = LinearOperator((n, n), matvec=solve, dtype=np.float64)
-    v0 = np.random.default_rng(0).standard_normal(n)
-    evals, evecs = eigsh(stiffness, k=k, M=mass, sigma=shift, which="LM", v0=v0, OPinv=inverse)
-    order = np.argsort(evals)
-    # the constant modes come out at +-1e-15: exactly zero far below the unit 1 / area
-    return np.where(evals[order] < 1e-8 / area, 0.0, evals[order]), evecs[:, order]
-
-
 def constant_modes(evals: np.ndarray) -> int:
     """The number of zero eigenvalues at the start of ``evals``: one per connected
     component (its constant function), zero up to rounding (below 1e-8 of the largest).
@@ -477,7 +395,7 @@ def constant_modes(evals: np.ndarray) -> int:
     Parameters
     ----------
     evals : (K,) float array
-        Ascending eigenvalues of :func:`eigenpairs`.
+        Ascending eigenvalues of :func:`intrinsym.laplacian.eigenpairs`.
 
     Returns
     -------
@@ -543,7 +461,7 @@ def wave_kernel_signature(evals: np.ndarray, evecs: np.ndarray, energies: np.nda
         Ascending eigenvalues, the first the constant modes (skipped, see
         :func:`constant_modes`).
     evecs : (P, K) float array
-        Eigenfunctions at the P points of interest (rows of :func:`eigenpairs`' evecs).
+        Eigenfunctions at the P points of interest (rows of :func:`intrinsym.laplacian.eigenpairs`' evecs).
     energies : (E,) float array
         Log-energies (see :func:`wks_energies`).
     sigma : float

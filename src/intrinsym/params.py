@@ -154,6 +154,13 @@ class Params:
         paper="paper",
     )
     eigenpairs: int = _p(100, "Laplace-Beltrami eigenpairs of the WKS / HKS", "unary")
+    eigen_coarse: int = _p(
+        8000,
+        "vertices of the decimated copy a mesh of more than five times as many is first solved on for "
+        "the eigenpairs (then refined on the mesh itself: intrinsym.laplacian.two_grid_eigenpairs); "
+        "0 solves on the mesh alone",
+        "unary",
+    )
     energies: int = _p(100, "log-energies of the WKS, diffusion times of the HKS", "unary")
     calibration: Calibration = _p(
         "local",
@@ -357,6 +364,7 @@ class Params:
                 "potential 'paper' (Eq. 5) applies to a single spin-image term only",
             ),
             (not 2 <= self.eigenpairs <= MAX_EIGENPAIRS, f"eigenpairs must lie in [2, {MAX_EIGENPAIRS}]"),
+            (self.eigen_coarse < 0, "eigen_coarse must be at least 0"),
             (not 2 <= self.energies <= MAX_ENERGIES, f"energies must lie in [2, {MAX_ENERGIES}]"),
             (self.calibration_k < 1, "calibration_k must be at least 1"),
             (

@@ -50,7 +50,7 @@ from scipy.linalg import solve_triangular
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
-from . import descriptors, neighbours, sampling
+from . import laplacian, neighbours, sampling
 
 __all__ = [
     "distortion",
@@ -293,7 +293,7 @@ def spectral_symmetry(
         of range, or every candidate refines to the identity (no symmetry found).
     """
     v = np.asarray(vertices, dtype=np.float64)
-    evals, evecs = descriptors.eigenpairs(v, faces, n_final + 1)
+    evals, evecs = laplacian.eigenpairs(v, faces, n_final + 1)
     maps, distortions = symmetry_candidates(
         v, evals, evecs, n_signs, n_final, n_candidates, n_samples, n_targets, min_gap
     )
@@ -460,7 +460,7 @@ def seeded_symmetry(
         Positions, any length unit.
     evecs : (N, K) float array
         Laplace-Beltrami eigenfunctions, ascending eigenvalue, the constant mode first
-        (as :func:`intrinsym.descriptors.eigenpairs` returns them), K > k_seed.
+        (as :func:`intrinsym.laplacian.eigenpairs` returns them), K > k_seed.
     source, target : (P,) int arrays
         Vertex pairs ``source[i] -> target[i]`` of the symmetry, P >= k_seed.
     k_seed : int

@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from . import descriptors, geodesics, sampling
+from . import descriptors, geodesics, laplacian, sampling
 from .params import OFFSET_TARGETS, SPIN_SCALES, Params
 from .surface import Surface, sample
 
@@ -157,11 +157,11 @@ def spin_descriptors(surface: Surface, vertices: np.ndarray, radius: float, p: P
     return descriptors.quantize(images, p.spin_levels)
 
 
-def spectrum(surface: Surface, k: int) -> Spectrum:
+def spectrum(surface: Surface, k: int, coarse: int) -> Spectrum:
     """Laplace-Beltrami eigenpairs of the working shape: (K,) values, (N, K) vectors,
-    K = ``k`` (at most N - 1)."""
+    K = ``k`` (at most N - 1); ``coarse`` as :func:`intrinsym.laplacian.eigenpairs`."""
     shape = surface.shape
-    return descriptors.eigenpairs(shape.vertices, shape.faces, min(k, len(shape.vertices) - 1))
+    return laplacian.eigenpairs(shape.vertices, shape.faces, min(k, len(shape.vertices) - 1), coarse)
 
 
 def spectra(src: Surface, tgt: Surface, p: Params, self_match: bool) -> tuple[Spectrum, Spectrum] | None:
@@ -171,8 +171,8 @@ def spectra(src: Surface, tgt: Surface, p: Params, self_match: bool) -> tuple[Sp
     spectral_terms = bool({"wks", "hks"} & set(p.unary_terms))
     if not spectral_terms and not (self_match and p.zoomout):
         return None
-    a = spectrum(src, p.eigenpairs if spectral_terms else p.zoomout_final + 1)
-    return a, (a if tgt is src else spectrum(tgt, p.eigenpairs))
+    a = spectrum(src, p.eigenpairs if spectral_terms else p.zoomout_final + 1, p.eigen_coarse)
+    return a, (a if tgt is src else spectrum(tgt, p.eigenpairs, p.eigen_coarse))
 
 
 def term_distances(

@@ -1,0 +1,90 @@
+"""Laplace-Beltrami eigenpairs: the analytic sphere, and the two-grid solve against the direct one."""
+
+import numpy as np
+import pytest
+
+from conftest import unit_sphere
+from intrinsym import laplacian, shapes
+from intrinsym.laplacian import COARSE_EXTRA, COARSE_PER_PAIR, FINE_PER_COARSE, eigenpairs, two_grid_eigenpairs
+
+
+def test_sphere_eigenvalues_are_the_spherical_harmonic_ones():
+    v, f = unit_sphere()
+    evals, evecs = eigenpairs(v, f, 16)
+    # Unit-area sphere, R^2 = 1 / (4 pi): lambda_l = l (l + 1) 4 pi with multiplicity 2l + 1.
+    expected = np.repeat([l * (l + 1) * 4 * np.pi for l in range(4)], [1, 3, 5, 7])
+    assert evals[0] == pytest.approx(0.0, abs=1e-8)
+    np.testing.assert_allclose(evals[1:], expected[1:], rtol=0.01)
+    mass = laplacian.laplace_beltrami(v, f)[1]
+    np.testing.assert_allclose(evecs.T @ mass @ evecs, np.eye(16), atol=1e-8)
+
+
+def test_point_cloud_spectrum_approximates_the_mesh_one():
+    v, f = unit_sphere()
+    mesh_evals = eigenpairs(v, f, 9)[0]
+    cloud_evals = eigenpairs(v, None, 9)[0]
+    np.testing.assert_allclose(cloud_evals[1:], mesh_evals[1:], rtol=0.05)
+
+
+def test_eigenpairs_rejects_bad_k():
+    v, f = unit_sphere(1)
+    with pytest.raises(ValueError, match="k must"):
+        eigenpairs(v, f, len(v))
+
+
+def _span_miss(exact: np.ndarray, approx: np.ndarray, mass) -> np.ndarray:
+    """Per exact M-orthonormal vector, 1 - the squared norm of its projection onto the
+    span of the approximate ones (0 where it lies in that span)."""
+    projection = exact.T @ (mass @ approx)
+    return 1.0 - (projection**2).sum(axis=1)
+
+
+def test_two_grid_matches_the_direct_solve_on_a_sphere():
+    # 10,242 vertices decimated to 2,500; l <= 5 is 36 modes, whole eigenspaces, so
+    # the subspaces compare exactly.
+    v, f = unit_sphere(5)
+    exact_vals, exact_vecs = eigenpairs(v, f, 36)
+    vals, vecs = two_grid_eigenpairs(v, f, 36, 2500)
+    mass = laplacian.laplace_beltrami(v, f)[1]
+    np.testing.assert_allclose(vecs.T @ mass @ vecs, np.eye(36), atol=1e-8)
+    assert vals[0] == 0.0
+    np.testing.assert_allclose(vals[1:], exact_vals[1:], rtol=1e-5)
+    assert _span_miss(exact_vecs, vecs, mass).max() < 1e-6
+    expected = np.repeat([l * (l + 1) * 4 * np.pi for l in range(6)], [1, 3, 5, 7, 9, 11])
+    np.testing.assert_allclose(vals[1:], expected[1:], rtol=0.01)
+
+
+def test_two_grid_matches_the_direct_solve_on_a_figure():
+    # A limbed shape without repeated eigenvalues: each Ritz value bounds its exact
+    # eigenvalue from above and lies within 1e-3 of it.
+    g = shapes.figure(30)
+    k = 40
+    exact_vals, exact_vecs = eigenpairs(g.vertices, g.faces, k)
+    vals, vecs = two_grid_eigenpairs(g.vertices, g.faces, k, 3000)
+    mass = laplacian.laplace_beltrami(g.vertices, g.faces)[1]
+    assert np.all(vals[1:] >= exact_vals[1:] * (1 - 1e-9))
+    np.testing.assert_allclose(vals[1:], exact_vals[1:], rtol=1e-3)
+    assert _span_miss(exact_vecs[:, : k // 2], vecs, mass).max() < 1e-4
+
+
+def test_eigenpairs_decimates_only_large_meshes_with_room_for_the_pairs():
+    v, f = unit_sphere(5)  # 10,242 vertices
+    k = 16
+    enough = COARSE_PER_PAIR * (k + COARSE_EXTRA)
+    direct = eigenpairs(v, f, k)[0]
+    # no more than FINE_PER_COARSE times the coarse size, too few coarse vertices per pair, a point
+    # cloud, no coarse size: solved directly
+    for faces, coarse in ((f, len(v) // FINE_PER_COARSE + 1), (f, enough - 1), (None, enough), (f, 0)):
+        expected = direct if faces is not None else eigenpairs(v, None, k)[0]
+        np.testing.assert_array_equal(eigenpairs(v, faces, k, coarse)[0], expected)
+    two_grid = eigenpairs(v, f, k, enough)[0]
+    np.testing.assert_array_equal(two_grid, two_grid_eigenpairs(v, f, k, enough)[0])
+    assert not np.array_equal(two_grid, direct)
+
+
+def test_two_grid_rejects_a_coarse_size_out_of_range():
+    v, f = unit_sphere(3)
+    with pytest.raises(ValueError, match="coarse must"):
+        two_grid_eigenpairs(v, f, 16, 30)
+    with pytest.raises(ValueError, match="coarse must"):
+        two_grid_eigenpairs(v, f, 16, len(v))
