@@ -10,7 +10,10 @@ before and at every setting, the share of vertices the default setting moved; th
 setting the means, the shapes at the targets and the largest loss. Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/refine.py --data DATA --saved DIR \\
-        [--shapes michael3 cat ...] [--anchors 20 15 30] [--tolerances 2 1.5 3]
+        [--shapes michael3 cat ...] [--anchors 20 15 30] [--tolerances 2 1.5 3] [--exact-anchors]
+
+``--exact-anchors`` anchors every source sample at its true image instead of its
+marginal peak: an oracle, what the trilateration reaches with perfect anchors.
 
 The first setting is the one whose moved share the table shows (the default: 20
 anchors, 2 spacings). A shape whose run found no global symmetry is left out.
@@ -39,8 +42,9 @@ def _scores(vmap: np.ndarray, mesh: intrinsym.Shape, truth: np.ndarray) -> tuple
     return s.within(0.05), s.within(0.10), s.mean_error
 
 
-def measure(case, saved: Path, settings: list[tuple[int, float]]) -> dict | None:
-    """One shape: scores before and at every setting, and the default setting's moved share."""
+def measure(case, saved: Path, settings: list[tuple[int, float]], exact: bool = False) -> dict | None:
+    """One shape: scores before and at every setting, and the default setting's moved share
+    (``exact``: the source samples anchored at their true images)."""
     mesh = intrinsym.load(case.mesh)
     truth = (
         evaluate.extrinsic_mirror(mesh.vertices)[0]
@@ -62,9 +66,13 @@ def measure(case, saved: Path, settings: list[tuple[int, float]]) -> dict | None
     ps, pt = sample_pair(surf, surf, p)
     spacing = result.info.resolved.target_spacing
     row: dict = {"shape": case.name, "before": _scores(start, mesh, truth)}
+    targets, marginals = pt, result.marginals
+    if exact:
+        targets = surf.vertex_map[truth[result.source_point_vertex]]
+        marginals = np.eye(len(ps), dtype=np.float32)
     for k, tol in settings:
         params = dataclasses.replace(p, refine_anchors=k)
-        refined = refined_map(surf, ps, pt, result.source_point_vertex, result.marginals, start, spacing, params, tol)
+        refined = refined_map(surf, ps, targets, result.source_point_vertex, marginals, start, spacing, params, tol)
         row[(k, tol)] = _scores(refined, mesh, truth)
         row.setdefault("moved", float(np.mean(refined != start)))
     return row
@@ -106,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shapes", nargs="+", metavar="NAME", help="shape or class names (default: all)")
     parser.add_argument("--anchors", nargs="+", type=int, default=[20, 15, 30])
     parser.add_argument("--tolerances", nargs="+", type=float, default=[2.0, 1.5, 3.0])
+    parser.add_argument("--exact-anchors", action="store_true", help="anchor the samples at their true images")
     args = parser.parse_args(argv)
     data = data_folder(args.data)
     if data is None:
@@ -115,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     chosen = [c for c in cases(data) if not wanted or c.name in wanted or c.cls in wanted]
     first = (args.anchors[0], args.tolerances[0])
     settings = [first] + [(k, first[1]) for k in args.anchors[1:]] + [(first[0], t) for t in args.tolerances[1:]]
-    rows = [r for r in (measure(c, args.saved, settings) for c in chosen) if r is not None]
+    rows = [r for r in (measure(c, args.saved, settings, args.exact_anchors) for c in chosen) if r is not None]
     print(markdown(rows, settings))
     return 0
 

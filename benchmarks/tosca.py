@@ -18,6 +18,9 @@ Per shape it records the marginal scores of the unary and of BP
 breadth), the global symmetry map's fraction of vertices within 0.05 and 0.10 of the
 true image and its mean error (:func:`intrinsym.evaluate.score_map`, geodesic, units of
 sqrt(area); what ``intrinsym evaluate`` reports), whether a global symmetry was found,
+the distortion of that map and of the true one (:func:`intrinsym.distortion.map_distortion`:
+the share of vertex pairs within 0.5 whose geodesic distance the map changes by more
+than 0.05, which tells how near to an isometry the pose keeps its symmetry),
 the global/partial decision and the statistics behind it (the share of source edges
 BP's argmax keeps, the share of source samples it returns to when applied twice, and
 whether the identity was kept as "no partner"), BP iterations,
@@ -70,7 +73,7 @@ from pathlib import Path
 import numpy as np
 
 import intrinsym
-from intrinsym import evaluate, geodesics, spectral
+from intrinsym import distortion, evaluate, geodesics, spectral
 from intrinsym.params import INVOLUTION_RADIUS
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
@@ -87,7 +90,7 @@ MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
 #: The involution statistic in the summary's words.
 _INVOLUTION = f"share of source samples BP's argmax, applied twice, returns to within {INVOLUTION_RADIUS}"
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 3
+CACHE_FORMAT = 4
 
 
 # --------------------------------------------------------------------------- shapes
@@ -316,6 +319,8 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     vmap = np.asarray(result.symmetry_map())
     row["global_found"] = bool((vmap >= 0).any())
     row["map"] = _map_row(evaluate.score_map(vmap, shape, sym))
+    row["map"]["distortion"] = distortion.map_distortion(vmap, shape, seed=seed).as_dict()
+    row["truth_distortion"] = distortion.map_distortion(sym, shape, seed=seed).as_dict()
     row["reliability"] = reliability(result, shape, sym) if row["global_found"] else None
     row["decision"] = decision(info)
     row["bp_iterations"] = field(info, "bp", "iterations")
@@ -403,6 +408,8 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
         ("map ≤0.05", ("map", "within_0.05"), True, ".3f"),
         ("map ≤0.10", ("map", "within_0.10"), True, ".3f"),
         ("map mean error", ("map", "mean_error"), False, ".4f"),
+        ("map distortion", ("map", "distortion", "above_0.05"), False, ".3f"),
+        ("truth distortion", ("truth_distortion", "above_0.05"), False, ".3f"),
         ("global found", ("global_found",), True, "bool"),
         ("identity share", ("decision", "statistic"), True, ".3f"),
         ("involution", ("decision", "involution"), True, ".3f"),

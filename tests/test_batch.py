@@ -99,7 +99,10 @@ def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path,
             == items.content_key(items.Item(name, str(meshes / mesh), PARAMS))
         )
     # the generated shapes carry their symmetry maps: scored as `intrinsym evaluate` scores them
-    assert json.loads((out / "star" / "scores.json").read_text())["mirror_hit"] == rows.loc["star", "mirror_hit"]
+    star_scores = json.loads((out / "star" / "scores.json").read_text())
+    assert star_scores["mirror_hit"] == rows.loc["star", "mirror_hit"]
+    # the star's true map is a symmetry of the mesh itself: it keeps every distance
+    assert rows.loc["star", "truth_distortion"] == star_scores["truth_distortion"]["above_0.05"] == 0.0
     assert np.isnan(rows.loc["spot", "mirror_hit"])
     on_disk = pd.read_csv(out / "summary.csv")
     assert list(on_disk["name"]) == list(frame["name"])

@@ -81,7 +81,12 @@ def test_evaluate_command(tmp_path, mirror):
     assert p.returncode == 0, p.stderr
     scores = json.loads(p.stdout)
     assert 0.0 <= scores["mirror_hit"] <= 1.0 and scores["n_scored"] > 0
+    # the true map is a reflection: an isometry, whatever the graph's metrication
+    assert scores["truth_distortion"]["above_0.05"] == 0.0 and scores["truth_distortion"]["n_pairs"] > 0
+    assert scores["map"]["distortion"]["above_0.05"] <= 1.0
     assert json.loads((out / "scores.json").read_text()) == scores
+    p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy")
+    assert p.returncode == 0 and "ground truth 0.000" in p.stdout
 
 
 @pytest.mark.parametrize(

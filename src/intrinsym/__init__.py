@@ -67,6 +67,7 @@ def example_path() -> Path:
     return Path(str(importlib.resources.files("intrinsym") / "data" / "spot.obj"))
 
 
+from .distortion import DistortionScores, map_distortion  # noqa: E402
 from .errors import InputError, IntrinsymError, ParameterError, ResourceError  # noqa: E402
 from .evaluate import MapScores, MarginalScores, load_symmetry_map, score_map, score_marginals  # noqa: E402
 from .extract import Extraction, ExtractParams, Symmetry  # noqa: E402
@@ -91,6 +92,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "BPIteration",
+    "DistortionScores",
     "ExtractParams",
     "Extraction",
     "InputError",
@@ -112,6 +114,7 @@ __all__ = [
     "load",
     "load_symmetry_map",
     "make_params",
+    "map_distortion",
     "match",
     "score_map",
     "score_marginals",

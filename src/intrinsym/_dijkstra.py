@@ -367,3 +367,27 @@ def balls(
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float64)
     counts, cols, dists = zip(*parts, strict=True)
     return np.concatenate(counts), np.concatenate(cols), np.concatenate(dists)
+
+
+def ball_pairs(
+    graph: tuple[np.ndarray, np.ndarray, np.ndarray], sources: np.ndarray, limit: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Graph-geodesic distances from ``sources`` to every vertex within ``limit``, as
+    sparse triples (:func:`balls` on Numba's threads; SciPy's ``dijkstra`` holds the GIL
+    and fills every row to the graph's size).
+
+    Parameters
+    ----------
+    graph : (indptr, indices, weights)
+        The graph as :func:`csr_arrays` returns it.
+    sources : (m,) int64
+    limit : float
+
+    Returns
+    -------
+    rows, cols, dists : (nnz,) int64, int64, float64
+        Source index (into ``sources``), vertex and distance of every vertex within
+        ``limit`` of a source.
+    """
+    counts, cols, dists = balls(*graph, sources, np.arange(len(graph[0]) - 1, dtype=np.int64), limit)
+    return np.repeat(np.arange(len(sources)), counts), cols, dists

@@ -39,7 +39,6 @@ from .io import load
 from .progress import BPIteration, ProgressEvent
 from .records import records
 from .result import Result
-from .shape import Shape
 
 
 def _number_or(words: tuple[str, ...], kind: type) -> Callable[[str], Any]:
@@ -468,24 +467,30 @@ def _run(args: argparse.Namespace) -> int:
         return _query(args, result, out)
     shape = load(args.mesh or result.info.input)
     sym = evaluate.load_symmetry_map(args.symmetry_map, len(shape.vertices), allow_missing=True)
-    scores = evaluate.score_marginals(
-        result.marginals, result.source_point_vertex, result.target_point_vertex, shape, sym, seed=args.seed
-    )
-    report = scores.as_dict()
-    if (out / "symmetry_map.npy").is_file():
-        maps = _map_scores(args, out, shape, sym)
-        report["map"] = maps.as_dict()
-        evaluate.plot_curve(maps, out / "curve.png")
-    elif args.labels:
+    has_map = (out / "symmetry_map.npy").is_file()
+    if args.labels and not has_map:
         raise InputError(f"{out}: no symmetry_map.npy to segment (rerun intrinsym detect)")
+    n = len(shape.vertices)
+    report, maps = evaluate.evaluation_report(
+        result.marginals,
+        result.source_point_vertex,
+        result.target_point_vertex,
+        evaluate.load_symmetry_map(out / "symmetry_map.npy", n, allow_missing=True) if has_map else None,
+        shape,
+        sym,
+        labels=evaluate.load_labels(args.labels, n) if args.labels else None,
+        seed=args.seed,
+    )
+    if maps is not None:
+        evaluate.plot_curve(maps, out / "curve.png")
     evaluate.save_scores(report, out / "scores.json")
     if args.json:
         print(json.dumps(report, indent=2))
     else:
         print(
-            f"mirror hit {scores.mirror_hit:.3f}  peak recall {scores.peak_recall:.3f}  "
-            f"decoy recall {scores.decoy_recall:.3f}  breadth {scores.breadth:.4f}  "
-            f"({scores.n_scored} source points scored)"
+            f"mirror hit {report['mirror_hit']:.3f}  peak recall {report['peak_recall']:.3f}  "
+            f"decoy recall {report['decoy_recall']:.3f}  breadth {report['breadth']:.4f}  "
+            f"({report['n_scored']} source points scored)"
         )
         if "map" in report:
             m = report["map"]
@@ -495,15 +500,12 @@ def _run(args: argparse.Namespace) -> int:
             )
             for label, value in m["segmentation"].items():
                 print(f"segmentation part {label}: {100 * value:.1f}%")
+        truth = report["truth_distortion"]
+        line = f"distortion (pairs within {truth['radius']} changed by more than 0.05): "
+        if "map" in report:
+            line += f"global map {report['map']['distortion']['above_0.05']:.3f}, "
+        print(line + f"ground truth {truth['above_0.05']:.3f}")
     return 0
-
-
-def _map_scores(args: argparse.Namespace, out: Path, shape: Shape, sym) -> evaluate.MapScores:
-    """Scores of OUT/symmetry_map.npy (with --labels, per part)."""
-    n = len(shape.vertices)
-    predicted = evaluate.load_symmetry_map(out / "symmetry_map.npy", n, allow_missing=True)
-    labels = evaluate.load_labels(args.labels, n) if args.labels else None
-    return evaluate.score_map(predicted, shape, sym, labels=labels)
 
 
 def _query(args: argparse.Namespace, result: Result, out: Path) -> int:

@@ -43,6 +43,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from . import geodesics
+from .distortion import map_distortion
 from .errors import InputError
 from .files import atomic_write
 from .shape import Shape, clean, surface_area
@@ -470,6 +471,51 @@ def score_map(
         n_vertices=len(pred),
         segmentation={} if labels is None else segmentation_scores(predicted, truth, labels),
     )
+
+
+def evaluation_report(
+    marginals: np.ndarray,
+    source_vertex: np.ndarray,
+    target_vertex: np.ndarray,
+    predicted: np.ndarray | None,
+    shape: Shape,
+    sym: np.ndarray,
+    labels: np.ndarray | None = None,
+    seed: int = 0,
+) -> tuple[dict, MapScores | None]:
+    """What ``intrinsym evaluate`` reports (``scores.json``) of a result.
+
+    Parameters
+    ----------
+    marginals : (S, T) float array
+    source_vertex, target_vertex : (S,), (T,) int
+        Input vertex of every source and target sample.
+    predicted : (N,) int or None
+        The symmetry map (image input vertex of every input vertex, -1 for none); None
+        when the result has none.
+    shape : Shape
+    sym : (N,) int
+        Ground truth, -1 where a vertex has no true image.
+    labels : (N,) int, optional
+        Part labels for the segmentation scores.
+    seed : int
+        Of the decoys and of the distortion's vertices.
+
+    Returns
+    -------
+    report : dict
+        :meth:`MarginalScores.as_dict`, the ground truth's :func:`map_distortion` under
+        ``"truth_distortion"`` and, with a map, :meth:`MapScores.as_dict` with its
+        distortion under ``"map"``.
+    map_scores : MapScores or None
+    """
+    report = score_marginals(marginals, source_vertex, target_vertex, shape, sym, seed=seed).as_dict()
+    report["truth_distortion"] = map_distortion(sym, shape, seed=seed).as_dict()
+    if predicted is None:
+        return report, None
+    scores = score_map(predicted, shape, sym, labels=labels)
+    report["map"] = {**scores.as_dict(), "distortion": map_distortion(predicted, shape, seed=seed).as_dict()}
+    return report, scores
 
 
 def plot_curve(scores: MapScores, path: str | os.PathLike, title: str = "") -> None:

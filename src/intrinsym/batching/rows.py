@@ -54,6 +54,8 @@ COLUMNS = (
     "map_within_0.10",
     "map_mean_error",
     "map_coverage",
+    "map_distortion",
+    "truth_distortion",
 )
 #: Scores of ``intrinsym evaluate`` that become columns: marginal scores, then the map's.
 MARGINAL_SCORES = ("mirror_hit", "peak_recall", "decoy_recall", "breadth")
@@ -119,6 +121,8 @@ def result_row(
     if scores:
         row.update({name: scores.get(name) for name in MARGINAL_SCORES})
         row.update({f"map_{name}": scores.get("map", {}).get(name) for name in MAP_SCORES})
+        row["map_distortion"] = scores.get("map", {}).get("distortion", {}).get("above_0.05")
+        row["truth_distortion"] = scores.get("truth_distortion", {}).get("above_0.05")
     return row
 
 
@@ -142,8 +146,7 @@ def row_of_folder(item: Item, key: str, folder: Path, status: str = "skipped") -
 
 
 def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> dict[str, Any]:
-    """``intrinsym evaluate``'s report of a result: marginal scores, and the global map's
-    under ``"map"``.
+    """``intrinsym evaluate``'s report of a result (:func:`intrinsym.evaluate.evaluation_report`).
 
     Parameters
     ----------
@@ -153,11 +156,15 @@ def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> d
         paths, or copies of their bytes).
     """
     shape = load(mesh)
-    sym = evaluate.load_symmetry_map(symmetry_map, len(shape.vertices), allow_missing=True)
-    report: dict[str, Any] = evaluate.score_marginals(
-        result.marginals, result.source_point_vertex, result.target_point_vertex, shape, sym, seed=0
-    ).as_dict()
-    if result.extraction is not None and result.support is not None:
-        lab = evaluate.load_labels(labels, len(shape.vertices)) if labels else None
-        report["map"] = evaluate.score_map(result.symmetry_map(), shape, sym, labels=lab).as_dict()
+    n = len(shape.vertices)
+    has_map = result.extraction is not None and result.support is not None
+    report, _ = evaluate.evaluation_report(
+        result.marginals,
+        result.source_point_vertex,
+        result.target_point_vertex,
+        result.symmetry_map() if has_map else None,
+        shape,
+        evaluate.load_symmetry_map(symmetry_map, n, allow_missing=True),
+        labels=evaluate.load_labels(labels, n) if labels and has_map else None,
+    )
     return report

@@ -1,0 +1,60 @@
+"""The distortion of a vertex map against Euclidean distances on a flat square."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from intrinsym.distortion import map_distortion
+from intrinsym.shape import from_arrays
+
+
+def unit_square_grid(n=24):
+    """The unit square (area 1) as a triangulated (n+1) x (n+1) grid, vertex i*(n+1)+j at
+    (i/n, j/n): flat and convex, so geodesics are straight lines."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    v = np.column_stack([i.ravel() / n, j.ravel() / n, np.zeros(i.size)])
+    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    f = np.concatenate([np.column_stack([a, a + n + 1, a + 1]), np.column_stack([a + 1, a + n + 1, a + n + 2])])
+    return v, f
+
+
+def test_map_distortion_against_euclidean_distances():
+    n = 24
+    v, f = unit_square_grid(n)
+    shape = from_arrays(v, f)
+    i, j = np.rint(v[:, 0] * n).astype(int), np.rint(v[:, 1] * n).astype(int)
+    every = len(v)  # every vertex a source: the scores cover all pairs within the radius
+    # a reflection of the square is an isometry: only the graph's metrication is left
+    reflection = (n - i) * (n + 1) + j
+    s = map_distortion(reflection, shape, radius=0.5, n_sources=every)
+    assert s.above(0.05) == 0.0 and s.mean < 0.005
+    # x -> x^2 (snapped to the grid) stretches the right and squeezes the left: the
+    # distortion of every pair from the Euclidean distances of the snapped points
+    squeeze = np.rint(n * (i / n) ** 2).astype(int) * (n + 1) + j
+    s = map_distortion(squeeze, shape, radius=0.5, n_sources=every)
+    d = np.linalg.norm(v[:, None, :2] - v[None, :, :2], axis=2)
+    near = (d <= 0.5) & ~np.eye(len(v), dtype=bool)
+    change = np.abs(np.linalg.norm(v[squeeze][:, None, :2] - v[squeeze][None, :, :2], axis=2) - d)[near]
+    for t in (0.05, 0.10):
+        assert s.above(t) == pytest.approx(np.mean(change > t), abs=0.02)
+    assert s.mean == pytest.approx(change.mean(), rel=0.05)
+    assert s.n_pairs == pytest.approx(near.sum(), rel=0.05)
+    assert set(s.as_dict()) == {"above_0.05", "above_0.10", "mean", "radius", "n_pairs"}
+
+
+def test_map_distortion_leaves_out_unmapped_vertices_and_checks_the_shape():
+    v, f = unit_square_grid(12)
+    shape = from_arrays(v, f)
+    half = np.where(v[:, 0] < 0.5, np.arange(len(v)), -1)
+    s = map_distortion(half, shape, n_sources=50, seed=3)
+    assert s.above(0.0) == 0.0 and 0 < s.n_pairs
+    left = np.flatnonzero(half >= 0)  # every pair lies in the mapped half
+    d = np.linalg.norm(v[left, None, :2] - v[None, left, :2], axis=2)
+    pairs = ((d <= 0.5) & ~np.eye(len(left), dtype=bool)).sum()
+    assert map_distortion(half, shape, n_sources=len(left)).n_pairs == pytest.approx(pairs, rel=0.05)
+    again = map_distortion(half, shape, n_sources=50, seed=3)
+    assert again.as_dict() == s.as_dict()
+    assert map_distortion(np.full(len(v), -1), shape).n_pairs == 0
+    with pytest.raises(ValueError, match="expected"):
+        map_distortion(np.arange(len(v) - 1), shape)
