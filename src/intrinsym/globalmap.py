@@ -19,8 +19,9 @@ tried when the chosen map keeps less than ``Params.fallback_mass``, and replace 
 when they keep ``MAP_MARGIN`` more.
 
 The winner is then refined by geodesic trilateration to the marginals' sample images
-(:func:`refined_map`, :mod:`intrinsym.refine`), and its kept mass is recorded as the
-global map's mass (``run.json``'s ``global_map``). Only a run whose extraction found a
+(:func:`refined_map`, :mod:`intrinsym.refine`) and smoothed by one projection onto the
+eigenfunctions (:func:`smoothed_map`, kept unless it keeps ``MAP_MARGIN`` less mass), and
+its kept mass is recorded as the global map's mass (``run.json``'s ``global_map``). Only a run whose extraction found a
 global symmetry gets a global map: the spectral candidates replace a weak map, they
 never invent a global symmetry.
 """
@@ -36,7 +37,7 @@ from . import spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
 from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, Params
-from .refine import agreeing_anchors, trilaterate
+from .refine import agreeing_anchors, spectral_descent, trilaterate
 from .support import Support
 from .surface import Surface
 from .vertex_maps import fitted_vertex_map
@@ -61,6 +62,9 @@ class GlobalMap:
         before the refinement.
     refined : float
         Share of the input vertices whose image :func:`refined_map` moved.
+    smoothed : float
+        Share of the input vertices whose image :func:`smoothed_map` then moved (0 when
+        it was refused or not run).
     """
 
     vertex_map: np.ndarray
@@ -68,6 +72,7 @@ class GlobalMap:
     source: str
     masses: dict[str, float]
     refined: float = 0.0
+    smoothed: float = 0.0
 
 
 def _input_images(surface: Surface, image: np.ndarray) -> np.ndarray:
@@ -254,11 +259,43 @@ def choose_global_map(
             maps["spectral"], masses["spectral"] = found
     best = choose(masses, p.fallback_mass)
     vertex_map = np.asarray(maps[best], dtype=np.int64)
-    if p.refine_anchors == 0:
-        return GlobalMap(vertex_map, masses[best], best, masses)
-    refined = refined_map(surface, ps, pt, source_vertex, marginals, vertex_map, spacing, p)
-    moved = float(np.mean(refined != vertex_map))
-    return GlobalMap(refined, mass_of(refined), best, masses, moved)
+    refined = vertex_map
+    if p.refine_anchors > 0:
+        refined = refined_map(surface, ps, pt, source_vertex, marginals, vertex_map, spacing, p)
+    final, mass = refined, mass_of(refined)
+    if p.smooth_map and spectrum is not None:
+        smoothed = smoothed_map(surface, refined, spectrum[1])
+        # the marginals judge, as they judge the candidates
+        smoothed_mass = mass_of(smoothed)
+        if smoothed_mass >= mass - MAP_MARGIN:
+            final, mass = smoothed, smoothed_mass
+    return GlobalMap(final, mass, best, masses, float(np.mean(refined != vertex_map)), float(np.mean(final != refined)))
+
+
+def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) -> np.ndarray:
+    """The global map projected once onto the eigenfunctions of the working shape
+    (:func:`intrinsym.refine.spectral_descent`), as the image of every input vertex.
+
+    Parameters
+    ----------
+    surface : Surface
+    vertex_map : (N_in,) int64
+        Image input vertex of every input vertex, -1 for none (kept).
+    evecs : (N, K) float array
+        Eigenfunctions of the working shape, constant first.
+
+    Returns
+    -------
+    (N_in,) int64
+    """
+    work = surface.vertex_map
+    has = np.flatnonzero(vertex_map >= 0)
+    start = work[vertex_map[has]]
+    image = spectral_descent(surface.graph, work[has], start, evecs)
+    moved = image != start
+    out = vertex_map.copy()
+    out[has[moved]] = _input_images(surface, image[moved])
+    return out
 
 
 def refined_map(

@@ -306,6 +306,16 @@ class Params:
         paper="off",
         self_match=True,
     )
+    smooth_map: bool = _p(
+        True,
+        "project the refined global map once onto the Laplace-Beltrami eigenfunctions (a "
+        "least-squares functional map on every vertex) and move each image, by steepest "
+        "descent over the geodesic graph from where it is, to the vertex nearest its "
+        "projection: removes the trilateration's vertex-to-vertex noise",
+        "global map",
+        paper="off",
+        self_match=True,
+    )
     fallback_mass: float = _p(
         0.6,
         "below this kept marginal mass of the chosen global map, the spectral baseline's "
@@ -422,6 +432,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         vertex_fit=0.0,
         zoomout=False,
         refine_anchors=0,
+        smooth_map=False,
         passes=1,
         trivial_weight=0.0,
     ),

@@ -381,7 +381,7 @@ def _solve(
         identity=outcome.identity,
         global_map=None
         if chosen is None
-        else GlobalMapStats(chosen.source, chosen.mass, chosen.masses, chosen.refined),
+        else GlobalMapStats(chosen.source, chosen.mass, chosen.masses, chosen.refined, chosen.smoothed),
         versions=versions(),
     )
     return Result(

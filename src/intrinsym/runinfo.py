@@ -173,12 +173,16 @@ class GlobalMapStats:
     refined : float
         Share of the input vertices whose image the trilateration moved
         (:func:`intrinsym.refine.trilaterate`; 0 without it).
+    smoothed : float
+        Share of the input vertices whose image the spectral smoothing then moved
+        (:func:`intrinsym.refine.spectral_descent`; 0 without it or where it was refused).
     """
 
     source: str
     mass: float
     masses: dict[str, float] = field(default_factory=dict)
     refined: float = 0.0
+    smoothed: float = 0.0
 
 
 @dataclass(frozen=True)
