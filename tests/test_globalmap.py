@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 from scipy.spatial import cKDTree
 
 import intrinsym
 from intrinsym import evaluate, laplacian, shapes, spectral
 from intrinsym.extract import Symmetry
-from intrinsym.globalmap import zoomout_map
-from intrinsym.params import GUIDE_TOLERANCE
+from intrinsym.globalmap import smoothed_map, zoomout_map
+from intrinsym.params import GUIDE_TOLERANCE, SMOOTH_POINTS
 from intrinsym.shape import from_arrays
 from intrinsym.surface import prepare, sample
 
@@ -89,3 +90,21 @@ def test_a_rotation_follows_the_plain_fit_where_the_marginals_say_so():
     stray = np.linalg.norm(work[involutive] - work[rotation], axis=1) > GUIDE_TOLERANCE
     assert stray.mean() > 0.5
     np.testing.assert_array_equal(guided, np.where(stray, plain, involutive))
+
+
+def test_smoothing_leaves_a_coarse_input_alone_and_smooths_a_fine_one(mirror):
+    # 42 input vertices, subdivided for the sampling: too few to fit 100 eigenfunctions
+    coarse = trimesh.creation.icosphere(subdivisions=1)
+    surf = prepare(from_arrays(np.asarray(coarse.vertices) * [1.6, 1.0, 1.0], np.asarray(coarse.faces)), 2000)
+    assert len(surf.shape.vertices) > 2000 and len(surf.vertex_map) == 42 < SMOOTH_POINTS * 100
+    evecs = laplacian.eigenpairs(surf.shape.vertices, surf.shape.faces, 100)[1]
+    shuffled = np.random.default_rng(0).permutation(42)
+    assert np.array_equal(smoothed_map(surf, shuffled, evecs), shuffled)
+    # the bent ellipsoid's mirror map, every image moved to a mesh neighbour: restored
+    v, f, sym = mirror
+    surf = prepare(from_arrays(v, f))
+    evecs = laplacian.eigenpairs(v, f, 60)[1]
+    neighbour = {a: b for a, b in f[:, :2]}
+    noisy = np.array([neighbour.get(int(s), int(s)) if i % 2 else int(s) for i, s in enumerate(sym)])
+    assert np.mean(noisy == sym) < 0.7
+    assert np.mean(smoothed_map(surf, noisy, evecs) == sym) > 0.95

@@ -36,7 +36,7 @@ import numpy as np
 from . import spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
-from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, Params
+from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, SMOOTH_POINTS, Params
 from .refine import agreeing_anchors, spectral_descent, trilaterate
 from .support import Support
 from .surface import Surface
@@ -287,9 +287,13 @@ def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) ->
     Returns
     -------
     (N_in,) int64
+        The map unchanged when fewer than ``SMOOTH_POINTS * K`` distinct vertices are mapped.
     """
     work = surface.vertex_map
     has = np.flatnonzero(vertex_map >= 0)
+    if len(np.unique(work[has])) < SMOOTH_POINTS * evecs.shape[1]:
+        # too few vertices for a least-squares fit that smooths rather than interpolates
+        return vertex_map.copy()
     start = work[vertex_map[has]]
     image = spectral_descent(surface.graph, work[has], start, evecs)
     moved = image != start

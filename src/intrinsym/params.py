@@ -49,6 +49,10 @@ GUIDE_TOLERANCE = 0.05
 REFINE_TOLERANCE = 2.0
 #: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
 REFINE_REACH = 0.3
+#: ``smooth_map`` fits its functional map only with at least this many mapped input
+#: vertices per eigenfunction; a coarser input keeps its map
+#: (:func:`intrinsym.globalmap.smoothed_map`).
+SMOOTH_POINTS = 4
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
