@@ -14,7 +14,7 @@ import numpy as np
 
 from . import geodesics
 from ._dijkstra import ball_pairs, csr_arrays
-from .shape import Shape, clean, surface_area
+from .shape import Shape
 
 __all__ = ["DISTORTION_RADIUS", "THRESHOLDS", "DistortionScores", "map_distortion"]
 
@@ -75,6 +75,7 @@ def map_distortion(
     n_sources: int = 200,
     seed: int = 0,
     thresholds: np.ndarray = THRESHOLDS,
+    unit: tuple | None = None,
 ) -> DistortionScores:
     """How much a vertex map changes geodesic distances (:class:`DistortionScores`).
 
@@ -96,13 +97,14 @@ def map_distortion(
     seed : int
     thresholds : (K,) float
         Distortion thresholds (sqrt(area) units).
+    unit : tuple, optional
+        ``geodesics.unit_area_graph(shape)``, when the caller has it already.
 
     Returns
     -------
     DistortionScores
     """
-    cleaned, vmap = clean(shape)
-    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(surface_area(cleaned)), cleaned.faces)
+    cleaned, vmap, graph = unit if unit is not None else geodesics.unit_area_graph(shape)
     image_in = np.asarray(vertex_map, dtype=np.int64)
     if image_in.shape != (len(shape.vertices),):
         raise ValueError(f"vertex_map has shape {image_in.shape}, expected ({len(shape.vertices)},)")

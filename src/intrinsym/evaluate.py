@@ -46,7 +46,7 @@ from . import geodesics
 from .distortion import map_distortion
 from .errors import InputError
 from .files import atomic_write
-from .shape import Shape, clean, surface_area
+from .shape import Shape, surface_area
 
 
 @dataclass(frozen=True)
@@ -250,6 +250,7 @@ def score_marginals(
     seed: int = 0,
     near: float = 0.10,
     peak: float = 0.05,
+    unit: tuple | None = None,
 ) -> MarginalScores:
     """Score marginals on the input mesh they were computed on.
 
@@ -265,10 +266,12 @@ def score_marginals(
         none: source samples there are not scored.
     seed : int
         Seed of the decoy choice.
+    near, peak : float
+        Radii of a hit and of a peak (sqrt(area) units).
+    unit : tuple, optional
+        ``geodesics.unit_area_graph(shape)``, when the caller has it already.
     """
-    cleaned, vmap = clean(shape)
-    area = surface_area(cleaned)
-    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(area), cleaned.faces)
+    cleaned, vmap, graph = unit if unit is not None else geodesics.unit_area_graph(shape)
     image = np.asarray(sym)[np.asarray(source_vertex)]
     has = image >= 0
     marginals = np.asarray(marginals)[has]
@@ -439,6 +442,7 @@ def score_map(
     sym: np.ndarray,
     thresholds: np.ndarray = THRESHOLDS,
     labels: np.ndarray | None = None,
+    unit: tuple | None = None,
 ) -> MapScores:
     """Score a per-vertex symmetry map on the input mesh (normalised to unit area here).
 
@@ -455,9 +459,10 @@ def score_map(
         In units of sqrt(surface area).
     labels : (N,) int, optional
         Part labels for :func:`segmentation_scores`.
+    unit : tuple, optional
+        ``geodesics.unit_area_graph(shape)``, when the caller has it already.
     """
-    cleaned, vmap = clean(shape)
-    graph = geodesics.surface_graph(cleaned.vertices / np.sqrt(surface_area(cleaned)), cleaned.faces)
+    _, vmap, graph = unit if unit is not None else geodesics.unit_area_graph(shape)
     truth = np.asarray(sym, dtype=np.int64)
     scored = truth >= 0
     pred = np.asarray(predicted, dtype=np.int64)[scored]
@@ -509,12 +514,13 @@ def evaluation_report(
         distortion under ``"map"``.
     map_scores : MapScores or None
     """
-    report = score_marginals(marginals, source_vertex, target_vertex, shape, sym, seed=seed).as_dict()
-    report["truth_distortion"] = map_distortion(sym, shape, seed=seed).as_dict()
+    unit = geodesics.unit_area_graph(shape)
+    report = score_marginals(marginals, source_vertex, target_vertex, shape, sym, seed=seed, unit=unit).as_dict()
+    report["truth_distortion"] = map_distortion(sym, shape, seed=seed, unit=unit).as_dict()
     if predicted is None:
         return report, None
-    scores = score_map(predicted, shape, sym, labels=labels)
-    report["map"] = {**scores.as_dict(), "distortion": map_distortion(predicted, shape, seed=seed).as_dict()}
+    scores = score_map(predicted, shape, sym, labels=labels, unit=unit)
+    report["map"] = {**scores.as_dict(), "distortion": map_distortion(predicted, shape, seed=seed, unit=unit).as_dict()}
     return report, scores
 
 

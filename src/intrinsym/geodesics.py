@@ -22,6 +22,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from ._dijkstra import balls, csr_arrays, n_workers, pair_block, split, symmetrize_rows
+from .shape import Shape, clean, surface_area
 
 __all__ = [
     "SparseDistances",
@@ -337,6 +338,23 @@ def surface_graph(
 
 
 # --------------------------------------------------------------------------- public
+
+
+def unit_area_graph(shape: Shape) -> tuple[Shape, np.ndarray, sp.csr_matrix]:
+    """The shape cleaned (:func:`intrinsym.shape.clean`) and its geodesic graph
+    (:func:`surface_graph`) scaled to unit area: what every score measures distances on.
+
+    Returns
+    -------
+    cleaned : Shape
+    vertex_map : (N_in,) int64
+        The cleaned vertex of every input vertex.
+    graph : (N, N) sparse
+        Edge lengths in units of sqrt(area).
+    """
+    cleaned, vertex_map = clean(shape)
+    graph = surface_graph(cleaned.vertices / np.sqrt(surface_area(cleaned)), cleaned.faces)
+    return cleaned, vertex_map, graph
 
 
 def distances_from(graph: sp.spmatrix, sources: np.ndarray, limit: float = np.inf, chunk: int = 256) -> np.ndarray:
