@@ -12,10 +12,12 @@ shipped example; truth: its best reflection), ``cat1``, ``michael1`` (defaults 2
 4000) and ``michael1-elephant`` (271 / 12722). Command::
 
     OPENBLAS_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python benchmarks/speed.py --old ../base/src \\
-        [--data DATA] [--cases spot cat1 michael1 michael1-elephant] [--backend gpu] [--repeat N]
+        [--data DATA] [--cases spot cat1 michael1 michael1-elephant] [--backend gpu] [--repeat N] [--cold]
 
 Warm the Numba caches of both versions first (one small ``detect`` each), so that no run
-pays for compilation.
+pays for compilation. ``--cold`` instead gives every run an empty Numba cache
+(``NUMBA_CACHE_DIR``), so that each compiles every kernel it calls: the first run after
+a fresh install.
 """
 
 from __future__ import annotations
@@ -51,10 +53,7 @@ import numpy as np
 import intrinsym
 mesh, ns, nt, out, backend = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
 t1 = time.perf_counter()
-if backend == "cpu":
-    r = intrinsym.detect(mesh, n_source=ns, n_target=nt)
-else:
-    r = intrinsym.detect(mesh, intrinsym.make_params(backend=backend), n_source=ns, n_target=nt)
+r = intrinsym.detect(mesh, intrinsym.make_params(backend=backend), n_source=ns, n_target=nt)
 t2 = time.perf_counter()
 info = r.info
 if isinstance(info, dict):
@@ -73,9 +72,14 @@ print(json.dumps({"import": t1 - t0, "detect": t2 - t1, "seconds": seconds, "ite
 """
 
 
-def run_once(src: str | None, mesh: str, n_source: int, n_target: int, out: Path, backend: str = "cpu") -> dict:
-    """One ``detect`` in a fresh process; ``src`` first on PYTHONPATH (None: the installed version)."""
+def run_once(
+    src: str | None, mesh: str, n_source: int, n_target: int, out: Path, backend: str = "cpu", cache: str | None = None
+) -> dict:
+    """One ``detect`` in a fresh process; ``src`` first on PYTHONPATH (None: the installed
+    version); ``cache``: the Numba cache folder (None: the usual one)."""
     env = dict(os.environ)
+    if cache is not None:
+        env["NUMBA_CACHE_DIR"] = cache
     if src is not None:
         env["PYTHONPATH"] = os.pathsep.join(p for p in (src, env.get("PYTHONPATH")) if p)
     start = time.perf_counter()
@@ -111,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     parser.add_argument("--backend", choices=("cpu", "gpu"), default="cpu", help="BP backend of both versions")
     parser.add_argument("--repeat", type=int, default=1, help="runs of each version per case, alternating")
+    parser.add_argument("--cold", action="store_true", help="every run with an empty Numba cache (the first run)")
     args = parser.parse_args(argv)
     data = data_folder(args.data)
     if data is None and any(CASES[c][0] is not None for c in args.cases):
@@ -126,11 +131,12 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 stem = Path(rel).stem.rstrip("0123456789")
                 sym = evaluate.load_symmetry_map(Path(mesh).with_name(f"{stem}.sym"), len(shape.vertices))
-            for _ in range(args.repeat):
+            for k in range(args.repeat):
                 for version, src in (("old", args.old), ("new", None)):
                     out = Path(tmp) / f"{case}_{version}.npz"
-                    row = run_once(src, mesh, n_source, n_target, out, args.backend)
-                    line = {"case": case, "version": version, "backend": args.backend, **row}
+                    cache = tempfile.mkdtemp(prefix=f"numba_{case}_{version}_{k}_", dir=tmp) if args.cold else None
+                    row = run_once(src, mesh, n_source, n_target, out, args.backend, cache)
+                    line = {"case": case, "version": version, "backend": args.backend, "cold": args.cold, **row}
                     print(json.dumps({**line, **scores(out, shape, sym)}), flush=True)
     return 0
 

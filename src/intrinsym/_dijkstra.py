@@ -3,12 +3,11 @@ run from many sources in parallel threads (used by :mod:`intrinsym.geodesics`)."
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
+
+from ._threads import map_ranges
 
 
 def csr_arrays(graph: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -338,16 +337,6 @@ def pair_block(
     return out
 
 
-def n_workers() -> int:
-    return max(1, min(nb.get_num_threads(), os.cpu_count() or 1))
-
-
-def split(n: int, n_parts: int) -> list[tuple[int, int]]:
-    """Contiguous [lo, hi) ranges covering range(n) in about n_parts pieces."""
-    bounds = np.linspace(0, n, max(1, min(n, n_parts)) + 1).astype(np.int64)
-    return [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-
-
 def balls(
     indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray, sources: np.ndarray, label: np.ndarray, limit: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -358,11 +347,7 @@ def balls(
     counts, cols, dists
         As :func:`ball_rows` returns them for all of ``sources`` in order.
     """
-    ranges = split(len(sources), 8 * n_workers())
-    with ThreadPoolExecutor(n_workers()) as pool:
-        parts = list(
-            pool.map(lambda r: ball_rows(indptr, indices, weights, sources[r[0] : r[1]], label, limit), ranges)
-        )
+    parts = map_ranges(lambda lo, hi: ball_rows(indptr, indices, weights, sources[lo:hi], label, limit), len(sources))
     if not parts:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float64)
     counts, cols, dists = zip(*parts, strict=True)

@@ -18,8 +18,10 @@ parallelised over query points (spin images) or source rows (NMI).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
+from ._sorted import left
+from ._threads import map_ranges
 from .errors import ParameterError
 
 #: Largest number of cells a uniform grid may address (cell keys are int64).
@@ -34,22 +36,10 @@ _CELLS_PER_RADIUS = 2
 _CELL_SLACK = 1e-9
 
 
-@njit(cache=True, inline="always")
-def _lower_bound(keys: np.ndarray, value: int) -> int:
-    """Index of the first entry of the sorted array ``keys`` that is ``>= value``."""
-    lo = 0
-    hi = keys.shape[0]
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if keys[mid] < value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
 def _spin_kernel(
+    lo_query: int,
+    hi_query: int,
     points: np.ndarray,
     normals: np.ndarray,
     cloud: np.ndarray,
@@ -63,20 +53,20 @@ def _spin_kernel(
     bins: int,
     out: np.ndarray,
 ) -> None:
-    """Accumulate normalised spin images into ``out`` (P, bins, bins) float32.
+    """Accumulate normalised spin images into ``out`` (P, bins, bins) float32, for the
+    query points ``order[lo_query:hi_query]``.
 
     ``cloud`` (M, 3) is sorted by the int64 cell key ``keys`` (M,) of the uniform grid
     with corner ``origin`` (3,), cell edge ``cell`` (>= radius / reach) and ``dims``
     (3,) cells per axis, key = (i * ny + j) * nz + k. Query points are visited in the
     order ``order`` (P,) (spatially sorted, for cache locality).
     """
-    n_points = points.shape[0]
     nx, ny, nz = dims[0], dims[1], dims[2]
     r2 = radius * radius
     inv_alpha = bins / radius  # columns: alpha in [0, radius)
     inv_beta = bins / (2.0 * radius)  # rows: beta in [-radius, radius)
     top = float(bins - 1)
-    for qq in prange(n_points):
+    for qq in range(lo_query, hi_query):
         q = order[qq]
         px = points[q, 0]
         py = points[q, 1]
@@ -99,8 +89,8 @@ def _spin_kernel(
                 for j in range(max(cj - reach, 0), min(cj + reach + 1, ny)):
                     # Cells (i, j, k0..k1) are contiguous in the sorted cloud.
                     base = (i * ny + j) * nz
-                    lo = _lower_bound(keys, base + k0)
-                    hi = _lower_bound(keys, base + k1 + 1)
+                    lo = left(keys, 0, len(keys), base + k0)
+                    hi = left(keys, 0, len(keys), base + k1 + 1)
                     for m in range(lo, hi):
                         dx = cloud[m, 0] - px
                         dy = cloud[m, 1] - py
@@ -212,11 +202,13 @@ def spin_images(
     qcoords = np.clip(np.floor((points - origin) / cell), -1.0, dims).astype(np.int64) + 1
     qkeys = (qcoords[:, 0] * (dims[1] + 2) + qcoords[:, 1]) * (dims[2] + 2) + qcoords[:, 2]
     query_order = np.argsort(qkeys, kind="stable")
-    _spin_kernel(
+    sorted_cloud = np.ascontiguousarray(cloud[cloud_order])
+    sorted_keys = np.ascontiguousarray(keys[cloud_order])
+    args = (
         points,
         normals,
-        np.ascontiguousarray(cloud[cloud_order]),
-        np.ascontiguousarray(keys[cloud_order]),
+        sorted_cloud,
+        sorted_keys,
         origin,
         dims,
         cell,
@@ -224,8 +216,8 @@ def spin_images(
         query_order,
         float(radius),
         int(bins),
-        out,
     )
+    map_ranges(_spin_kernel, len(points), *args, out)
     return out
 
 
@@ -277,12 +269,12 @@ def _clogc_table(n_pixels: int) -> np.ndarray:
     return table
 
 
-@njit(parallel=True, cache=True)
-def _entropies(q: np.ndarray, levels: int, table: np.ndarray) -> np.ndarray:
-    """Entropy (nats) of the level histogram of each row of ``q`` (N, B) -> (N,)."""
-    n, n_pixels = q.shape
-    out = np.empty(n, dtype=np.float64)
-    for i in prange(n):
+@njit(cache=True, nogil=True)
+def _entropies(lo: int, hi: int, q: np.ndarray, levels: int, table: np.ndarray, out: np.ndarray) -> None:
+    """Entropy (nats) of the level histogram of rows ``lo:hi`` of ``q`` (N, B), into
+    ``out`` (N,)."""
+    n_pixels = q.shape[1]
+    for i in range(lo, hi):
         hist = np.zeros(levels, dtype=np.int64)
         for k in range(n_pixels):
             hist[q[i, k]] += 1
@@ -290,11 +282,19 @@ def _entropies(q: np.ndarray, levels: int, table: np.ndarray) -> np.ndarray:
         for c in range(levels):
             acc += table[hist[c]]
         out[i] = -acc / n_pixels
+
+
+def _entropy_rows(q: np.ndarray, levels: int, table: np.ndarray) -> np.ndarray:
+    """:func:`_entropies` of every row of ``q`` (N, B) -> (N,) float64."""
+    out = np.empty(len(q), dtype=np.float64)
+    map_ranges(_entropies, len(q), q, levels, table, out)
     return out
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, nogil=True)
 def _nmi_kernel(
+    lo: int,
+    hi: int,
     qa: np.ndarray,
     qb: np.ndarray,
     ha: np.ndarray,
@@ -303,15 +303,15 @@ def _nmi_kernel(
     levels: int,
     out: np.ndarray,
 ) -> None:
-    """Fill ``out`` (S, T) float32 with ``(H1 + H2 - H12) / H12`` for all row pairs."""
-    n_a, n_pixels = qa.shape
+    """Fill rows ``lo:hi`` of ``out`` (S, T) float32 with ``(H1 + H2 - H12) / H12``."""
+    n_pixels = qa.shape[1]
     n_b = qb.shape[0]
     n_joint = levels * levels
     inv_pixels = 1.0 / n_pixels
     # Summing the table over the whole joint histogram costs levels^2 per pair; past
     # B cells it is cheaper to revisit only the (at most B) cells the pair touched.
     scan_cells = n_joint <= n_pixels
-    for s in prange(n_a):
+    for s in range(lo, hi):
         hist = np.zeros(n_joint, dtype=np.int32)
         row = np.empty(n_pixels, dtype=np.int32)
         for k in range(n_pixels):
@@ -376,15 +376,8 @@ def nmi(qa: np.ndarray, qb: np.ndarray, levels: int = 8) -> np.ndarray:
     if int(qa.max()) >= levels or int(qb.max()) >= levels:
         raise ValueError(f"quantised values must be < levels = {levels}")
     table = _clogc_table(n_pixels)
-    _nmi_kernel(
-        qa,
-        qb,
-        _entropies(qa, levels, table),
-        _entropies(qb, levels, table),
-        table,
-        int(levels),
-        out,
-    )
+    ha, hb = _entropy_rows(qa, levels, table), _entropy_rows(qb, levels, table)
+    map_ranges(_nmi_kernel, len(qa), qa, qb, ha, hb, table, int(levels), out)
     return out
 
 

@@ -12,7 +12,6 @@ units of the vertex coordinates.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba as nb
@@ -21,7 +20,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from ._dijkstra import balls, csr_arrays, n_workers, pair_block, split, symmetrize_rows
+from ._dijkstra import balls, csr_arrays, pair_block, symmetrize_rows
+from ._threads import map_ranges
 from .shape import Shape, clean, surface_area
 
 __all__ = [
@@ -453,21 +453,19 @@ def pair_distances(graph: sp.spmatrix, pairs: np.ndarray, limit: float = np.inf)
     group_ptr = np.r_[starts, len(p)].astype(np.int64)
     group_source = first[starts]
     targets = p[order, 1]
-    ranges = split(len(group_source), 4 * n_workers())
-    with ThreadPoolExecutor(n_workers()) as pool:
-        parts = pool.map(
-            lambda r: pair_block(
-                indptr,
-                indices,
-                weights,
-                group_source[r[0] : r[1]],
-                group_ptr[r[0] : r[1] + 1] - group_ptr[r[0]],
-                targets[group_ptr[r[0]] : group_ptr[r[1]]],
-                float(limit),
-            ),
-            ranges,
-        )
-        out_sorted = np.concatenate([np.zeros(0), *parts])
+    parts = map_ranges(
+        lambda lo, hi: pair_block(
+            indptr,
+            indices,
+            weights,
+            group_source[lo:hi],
+            group_ptr[lo : hi + 1] - group_ptr[lo],
+            targets[group_ptr[lo] : group_ptr[hi]],
+            float(limit),
+        ),
+        len(group_source),
+    )
+    out_sorted = np.concatenate([np.zeros(0), *parts])
     out = np.empty(len(p), dtype=np.float64)
     out[order] = out_sorted
     return out

@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._dijkstra import ball_pairs, csr_arrays
+from ._threads import map_ranges
 from .geodesics import pair_distances
 
 __all__ = ["agreeing_anchors", "spectral_descent", "trilaterate"]
@@ -107,14 +108,13 @@ def agreeing_anchors(graph: sp.spmatrix, anchors: np.ndarray, images: np.ndarray
     return pair_distances(graph, pairs, limit=agree) <= agree
 
 
-@nb.njit(parallel=True, cache=True)
-def _descend(start, ptr, cols, targets, embedding, indptr, indices, need, tolerance2):  # pragma: no cover
-    """Steepest descent of every query q over the graph's neighbours, from ``start[q]``, to a
+@nb.njit(cache=True, nogil=True)
+def _descend(lo, hi, start, ptr, cols, targets, embedding, indptr, indices, need, tolerance2, out):  # pragma: no cover
+    """Steepest descent of the queries ``lo:hi`` over the graph's neighbours, from ``start[q]``, to a
     local minimum of ``sum_k (embedding[y, cols[k]] - targets[k])^2`` over k in
     ``ptr[q]:ptr[q + 1]``; a query with fewer than ``need`` terms, or whose start costs at
-    most ``tolerance2`` per term, keeps its start."""
-    out = start.copy()
-    for q in nb.prange(len(start)):
+    most ``tolerance2`` per term, keeps its start. The images go to ``out``, which holds the starts."""
+    for q in range(lo, hi):
         a0 = ptr[q]
         a1 = ptr[q + 1]
         if a1 - a0 < need:
@@ -143,6 +143,22 @@ def _descend(start, ptr, cols, targets, embedding, indptr, indices, need, tolera
                 break
             y = move
         out[q] = y
+
+
+def _descent(
+    start: np.ndarray,
+    ptr: np.ndarray,
+    cols: np.ndarray,
+    targets: np.ndarray,
+    embedding: np.ndarray,
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    need: int,
+    tolerance2: float,
+) -> np.ndarray:
+    """:func:`_descend` of every query, over threads; returns the images."""
+    out = start.copy()
+    map_ranges(_descend, len(start), start, ptr, cols, targets, embedding, indptr, indices, need, tolerance2, out)
     return out
 
 
@@ -208,7 +224,7 @@ def trilaterate(
     image_distance = np.full((n, len(anchors)), 2.0 * horizon, dtype=np.float32)
     image_distance[cols, rows] = dists
     indptr, indices, _ = arrays
-    return _descend(start, ptr, sample, distance, image_distance, indptr, indices, k, tolerance**2)
+    return _descent(start, ptr, sample, distance, image_distance, indptr, indices, k, tolerance**2)
 
 
 def spectral_descent(graph: sp.spmatrix, points: np.ndarray, start: np.ndarray, evecs: np.ndarray) -> np.ndarray:
@@ -256,4 +272,4 @@ def spectral_descent(graph: sp.spmatrix, points: np.ndarray, start: np.ndarray, 
     # every point's cost runs over all k columns of the embedding
     ptr = np.arange(0, (n + 1) * k, k, dtype=np.int64)
     cols = np.tile(np.arange(k, dtype=np.int64), n)
-    return _descend(start, ptr, cols, (basis @ C).ravel(), embedding, indptr, indices, 0, -1.0)
+    return _descent(start, ptr, cols, (basis @ C).ravel(), embedding, indptr, indices, 0, -1.0)

@@ -59,7 +59,11 @@ def _fps_kernel(x: np.ndarray, y: np.ndarray, z: np.ndarray, start: int, n_max: 
             dy = y[i] - cy
             dz = z[i] - cz
             best[i] = min(best[i], dx * dx + dy * dy + dz * dz)
-        current = int(np.argmax(best))
+        # np.argmax, written out: its implementation adds 0.5 s to the first run's compilation
+        current = 0
+        for i in range(1, n_pts):
+            if best[i] > best[current]:
+                current = i
         far_sq = best[current]
         if count == n_max or far_sq < min_sq or far_sq <= 0.0:
             return chosen[:count]

@@ -14,10 +14,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import Executor
 
 import numba as nb
 import numpy as np
 
+from .._sorted import right
+from .._threads import map_ranges, worker_pool
 from ..model import MRF
 from .common import BPResult, Sweep, run_schedule
 from .schedule import Steps, incoming_edges
@@ -81,138 +84,151 @@ def _horner(t, coef):
     return w
 
 
-@nb.njit(parallel=True, cache=True, fastmath=True)
+@nb.njit(cache=True, nogil=True, fastmath=True)
+def _products(lo, hi, k0, k1, node, steps_ptr, steps_out, read, unary, ptr, directed, col, ht):  # pragma: no cover
+    """Rows ``lo:hi`` of ``ht``: h of every outgoing message of the batch's steps
+    ``k0:k1`` (the node's unary times its incoming messages, the receiver's own divided
+    out), in the column ``col`` of the message's position by edge length."""
+    e0 = steps_ptr[k0]
+    for f in range(lo, hi):
+        for k in range(k0, k1):
+            s = node[k]
+            p = np.float64(unary[s, f])
+            for i in range(ptr[s], ptr[s + 1]):
+                p *= read[directed[i], f]
+            for i in range(steps_ptr[k], steps_ptr[k + 1]):
+                ht[f, col[i - e0]] = p / read[steps_out[i] ^ 1, f]
+
+
+@nb.njit(cache=True, nogil=True, fastmath=True)
+def _rings(lo, hi, n_b, indptr, indices, dist, d, ring_scale, coef, ht, ring):  # pragma: no cover
+    """Rows ``lo:hi`` of ``ring``: the ring sums of Eq. 7 of the batch's ``n_b``
+    messages, whose edge lengths ``d`` are sorted."""
+    dlt = ring_scale[0]  # delta, and 1 / delta^2, in the storage precision
+    inv = ring_scale[1]
+    zero = dlt - dlt
+    first = d[0] - dlt
+    last = d[n_b - 1] + dlt
+    for fq in range(lo, hi):
+        acc = ring[fq, :n_b]
+        for c in range(n_b):
+            acc[c] = zero
+        a = indptr[fq]
+        b = indptr[fq + 1]
+        j = right(dist, a, b, first)
+        lo_c = 0
+        hi_c = 0
+        while j < b and dist[j] < last:
+            x = dist[j]
+            while d[lo_c] <= x - dlt:
+                lo_c += 1
+            while hi_c < n_b and d[hi_c] < x + dlt:
+                hi_c += 1
+            # views starting at 0 let LLVM drop the negative-index wraparound and vectorise
+            av = acc[lo_c:hi_c]
+            hv = ht[indices[j], lo_c:hi_c]
+            dv = d[lo_c:hi_c]
+            for c in range(hi_c - lo_c):
+                y = x - dv[c]
+                t = y * y * inv
+                w = _horner(t, coef)
+                av[c] += max(w, zero) * hv[c]
+            j += 1
+
+
+@nb.njit(cache=True, nogil=True, fastmath=True)
+def _normalise(lo, hi, n_b, outs, by_length, rho2, damping, ht, ring, hsum, colmax, write, moved):  # pragma: no cover
+    """The blocks ``lo:hi`` of 16 messages: ``rho^2 * sum(h)`` added to the ring sums, each
+    message max-normalised, damped and written; returns the largest change."""
+    n_t = ht.shape[0]
+    change = 0.0
+    # 16 messages per block: reads of ring rows and writes of message rows both stream
+    for blk in range(lo, hi):
+        c_lo = blk * 16
+        c_hi = min(n_b, c_lo + 16)
+        for c in range(c_lo, c_hi):
+            hsum[c] = 0.0
+            colmax[c] = 0.0
+        for f in range(n_t):
+            for c in range(c_lo, c_hi):
+                hsum[c] += ht[f, c]
+        for f in range(n_t):
+            for c in range(c_lo, c_hi):
+                v = ring[f, c] + rho2 * hsum[c]
+                ring[f, c] = v
+                colmax[c] = max(colmax[c], v)
+        for c in range(c_lo, c_hi):
+            out = outs[by_length[c]]
+            m = colmax[c]
+            mc = 0.0
+            for f in range(n_t):
+                old = write[out, f]
+                v = (1.0 - damping) * (ring[f, c] / m) + damping * old
+                write[out, f] = v
+                mc = max(mc, abs(v - old))
+            moved[out] = mc
+            change = max(change, mc)
+    return change
+
+
 def _sweep(
-    steps_node,
-    steps_ptr,
-    steps_out,
-    batch_ptr,
-    read,
-    write,
-    unary,
-    ptr,
-    directed,
-    edge_length,
-    indptr,
-    indices,
-    dist,
-    coef,
-    ring_scale,
-    rho2,
-    damping,
-    ht,
-    ring,
-    hsum,
-    colmax,
-    moved,
-    order,
-):
-    """Run one iteration of message updates; return the largest change.
+    steps: Steps,
+    read: np.ndarray,
+    write: np.ndarray,
+    unary: np.ndarray,
+    ptr: np.ndarray,
+    directed: np.ndarray,
+    edge_length: np.ndarray,
+    targets: tuple[np.ndarray, np.ndarray, np.ndarray],
+    coef: tuple[float, ...],
+    ring_scale: np.ndarray,
+    rho2: float,
+    damping: float,
+    work: dict[str, np.ndarray],
+    moved: np.ndarray,
+    order: np.ndarray,
+    pool: Executor,
+) -> float:
+    """Run one iteration of message updates, on the threads of ``pool``; return the
+    largest change.
 
     ``moved[d]`` receives the largest change of every directed edge d sent. A batch's
-    messages ``steps_out[e0:e0 + n_b]`` in order of edge length are those at the
+    messages ``steps.out[e0:e0 + n_b]`` in order of edge length are those at the
     positions ``order[e0:e0 + n_b]`` within it (:func:`_by_length`).
 
     ``read`` holds the incoming messages, ``write`` receives the outgoing ones (the same
     array in the serial schedules). The steps of one batch read their inputs before any
     of them writes (:func:`~intrinsym.bp.schedule.schedule_steps` only batches steps
-    that do not feed each other). Per batch: h of every outgoing message, transposed
-    into ``ht`` (T, B) with the messages sorted by edge length; the ring sums of Eq. 7
-    row by row; then ``rho^2 * sum(h)`` is added and each message is max-normalised. The message to q
-    divides q's own message out of the node's product, which is safe because every
-    message is bounded below by rho^2.
+    that do not feed each other). Per batch, each step over the target rows on threads
+    (:func:`intrinsym._threads.map_ranges`): h of every outgoing message, transposed
+    into ``ht`` (T, B) with the messages sorted by edge length (:func:`_products`); the
+    ring sums of Eq. 7 row by row (:func:`_rings`); then ``rho^2 * sum(h)`` is added and
+    each message is max-normalised (:func:`_normalise`). The message to q divides q's
+    own message out of the node's product, which is safe because every message is
+    bounded below by rho^2.
     """
     n_t = unary.shape[1]
-    dlt = ring_scale[0]  # delta, and 1 / delta^2, in the storage precision
-    inv = ring_scale[1]
-    zero = dlt - dlt
+    indptr, indices, dist = targets
+    ht, ring, hsum, colmax = work["ht"], work["ring"], work["hsum"], work["colmax"]
     change = 0.0
-    for bt in range(len(batch_ptr) - 1):
-        k0 = batch_ptr[bt]
-        k1 = batch_ptr[bt + 1]
-        e0 = steps_ptr[k0]
-        n_b = steps_ptr[k1] - e0
+    for bt in range(len(steps.batch) - 1):
+        k0, k1 = int(steps.batch[bt]), int(steps.batch[bt + 1])
+        e0 = int(steps.ptr[k0])
+        n_b = int(steps.ptr[k1]) - e0
         if n_b == 0:
             continue
-        outs = steps_out[e0 : e0 + n_b]
+        outs = steps.out[e0 : e0 + n_b]
         by_length = order[e0 : e0 + n_b]
-        # explicit loops: Numba's argsort, fancy indexing and slice assignment compile slowly
         col = np.empty(n_b, dtype=np.int64)
-        d = np.empty(n_b, dtype=edge_length.dtype)
-        for i in range(n_b):
-            col[by_length[i]] = i
-            d[i] = edge_length[outs[by_length[i]] >> 1]
-        first = d[0] - dlt
-        last = d[n_b - 1] + dlt
-        for f in nb.prange(n_t):
-            for k in range(k0, k1):
-                s = steps_node[k]
-                p = np.float64(unary[s, f])
-                for i in range(ptr[s], ptr[s + 1]):
-                    p *= read[directed[i], f]
-                for i in range(steps_ptr[k], steps_ptr[k + 1]):
-                    ht[f, col[i - e0]] = p / read[steps_out[i] ^ 1, f]
-        for fq in nb.prange(n_t):
-            acc = ring[fq, :n_b]
-            for c in range(n_b):
-                acc[c] = zero
-            a = indptr[fq]
-            b = indptr[fq + 1]
-            j = a  # the first entry > first: searchsorted(side="right"), by bisection
-            top = b
-            while j < top:
-                mid = (j + top) >> 1
-                if dist[mid] <= first:
-                    j = mid + 1
-                else:
-                    top = mid
-            lo = 0
-            hi = 0
-            while j < b and dist[j] < last:
-                x = dist[j]
-                while d[lo] <= x - dlt:
-                    lo += 1
-                while hi < n_b and d[hi] < x + dlt:
-                    hi += 1
-                # views starting at 0 let LLVM drop the negative-index wraparound and vectorise
-                av = acc[lo:hi]
-                hv = ht[indices[j], lo:hi]
-                dv = d[lo:hi]
-                for c in range(hi - lo):
-                    y = x - dv[c]
-                    t = y * y * inv
-                    w = _horner(t, coef)
-                    av[c] += max(w, zero) * hv[c]
-                j += 1
-        # 16 messages per task: reads of ring rows and writes of message rows both stream
-        n_blk = (n_b + 15) // 16
-        for blk in nb.prange(n_blk):
-            c_lo = blk * 16
-            c_hi = min(n_b, c_lo + 16)
-            for c in range(c_lo, c_hi):
-                hsum[c] = 0.0
-                colmax[c] = 0.0
-            for f in range(n_t):
-                for c in range(c_lo, c_hi):
-                    hsum[c] += ht[f, c]
-            for f in range(n_t):
-                for c in range(c_lo, c_hi):
-                    v = ring[f, c] + rho2 * hsum[c]
-                    ring[f, c] = v
-                    colmax[c] = max(colmax[c], v)
-            local = 0.0
-            for c in range(c_lo, c_hi):
-                out = outs[by_length[c]]
-                m = colmax[c]
-                mc = 0.0
-                for f in range(n_t):
-                    old = write[out, f]
-                    v = (1.0 - damping) * (ring[f, c] / m) + damping * old
-                    write[out, f] = v
-                    mc = max(mc, abs(v - old))
-                moved[out] = mc
-                local = max(local, mc)
-            change = max(change, local)
+        col[by_length] = np.arange(n_b)
+        d = edge_length[outs[by_length] >> 1]
+        inputs = (k0, k1, steps.node, steps.ptr, steps.out, read, unary, ptr, directed, col, ht)
+        map_ranges(_products, n_t, *inputs, pieces_per_worker=1, pool=pool)
+        rings = (n_b, indptr, indices, dist, d, ring_scale, coef, ht, ring)
+        map_ranges(_rings, n_t, *rings, pieces_per_worker=1, pool=pool)
+        outputs = (n_b, outs, by_length, rho2, damping, ht, ring, hsum, colmax, write, moved)
+        changes = map_ranges(_normalise, (n_b + 15) // 16, *outputs, pieces_per_worker=1, pool=pool)
+        change = max(change, *changes)
     return change
 
 
@@ -276,31 +292,25 @@ def sparse_sweep(mrf: MRF, dtype: type = np.float32, damping: float = 0.0) -> Sw
                 hsum=np.empty(width),
                 colmax=np.empty(width),
             )
-        return _sweep(
-            steps.node,
-            steps.ptr,
-            steps.out,
-            steps.batch,
-            read,
-            write,
-            unary,
-            ptr,
-            directed,
-            edge_length,
-            tg.indptr,
-            indices,
-            dist,
-            coef,
-            ring_scale,
-            rho2,
-            damping,
-            work["ht"],
-            work["ring"],
-            work["hsum"],
-            work["colmax"],
-            moved,
-            _by_length(steps, edge_length),
-        )
+        with worker_pool() as pool:
+            return _sweep(
+                steps,
+                read,
+                write,
+                unary,
+                ptr,
+                directed,
+                edge_length,
+                (tg.indptr, indices, dist),
+                coef,
+                ring_scale,
+                rho2,
+                damping,
+                work,
+                moved,
+                _by_length(steps, edge_length),
+                pool,
+            )
 
     return sweep
 

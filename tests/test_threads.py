@@ -1,0 +1,80 @@
+"""Row ranges on threads: every row once, and the same result on any thread count."""
+
+from __future__ import annotations
+
+import threading
+
+import numba as nb
+import numpy as np
+import pytest
+
+from conftest import sphere_points, unit_sphere
+from intrinsym import _threads, geodesics
+from intrinsym.bp import belief_propagation
+from intrinsym.descriptors import nmi, quantize, spin_images
+from intrinsym.laplacian import eigenpairs
+from intrinsym.neighbours import nearest_rows
+from intrinsym.refine import spectral_descent
+from test_bp import sphere_problem
+
+
+@pytest.mark.parametrize("n,parts", [(0, 4), (1, 4), (7, 3), (100, 16), (5, 50)])
+def test_split_covers_the_range_in_order(n, parts):
+    ranges = _threads.split(n, parts)
+    covered = np.concatenate([np.arange(lo, hi) for lo, hi in ranges]) if ranges else np.zeros(0)
+    assert np.array_equal(covered, np.arange(n))
+    assert all(hi > lo for lo, hi in ranges)
+    assert len(ranges) == min(n, parts)
+
+
+def test_map_ranges_visits_every_row_once_and_keeps_the_order():
+    seen = np.zeros(1000, dtype=np.int64)
+    threads = set()
+
+    def fn(lo, hi, offset):
+        threads.add(threading.get_ident())
+        seen[lo:hi] += 1
+        return lo + offset
+
+    results = _threads.map_ranges(fn, len(seen), 5)
+    starts = [lo for lo, _ in _threads.split(len(seen), _threads.PIECES_PER_WORKER * _threads.n_workers())]
+    assert results == [lo + 5 for lo in starts]
+    assert (seen == 1).all()
+    assert len(threads) <= _threads.n_workers()
+    assert _threads.map_ranges(fn, 0, 5) == []
+    assert len(_threads.map_ranges(fn, 1000, 0, pieces_per_worker=1)) == min(1000, _threads.n_workers())
+
+
+def _on_threads(n: int, fn):
+    before = nb.get_num_threads()
+    nb.set_num_threads(n)
+    try:
+        return fn()
+    finally:
+        nb.set_num_threads(before)
+
+
+@pytest.mark.skipif(nb.config.NUMBA_NUM_THREADS < 2, reason="needs two Numba threads")
+def test_kernels_give_the_same_result_on_one_thread_and_on_two():
+    """The descriptor kernels, the BP sweep, the nearest-row search and the descent split
+    their rows over the threads; each row is computed alone, so the results agree bit for
+    bit."""
+    cloud = sphere_points(3000, seed=1)
+    points = cloud[:200]
+    rng = np.random.default_rng(0)
+    basis, query = rng.normal(size=(500, 20)), rng.normal(size=(300, 20))
+    mrf, _ = sphere_problem(30, 400, 4, seed=2)
+    vertices, faces = unit_sphere(3)
+    graph = geodesics.surface_graph(vertices, faces)
+    evecs = eigenpairs(vertices, faces, 20)[1]
+    start = rng.permutation(len(vertices))
+
+    def run():
+        images = quantize(spin_images(points, points, cloud, 0.3, 8))
+        marginals = belief_propagation(mrf, schedule="colour", iterations=4, tol=0.0, dtype=np.float32).marginals
+        descent = spectral_descent(graph, np.arange(len(vertices)), start, evecs)
+        return images, nmi(images, images), nearest_rows(query, basis), marginals, descent
+
+    one, two = _on_threads(1, run), _on_threads(2, run)
+    for a, b in zip(one, two, strict=True):
+        assert np.array_equal(a, b)
