@@ -340,7 +340,8 @@ def pair_block(
 def balls(
     indptr: np.ndarray, indices: np.ndarray, weights: np.ndarray, sources: np.ndarray, label: np.ndarray, limit: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`ball_rows` from every source, the sources split over Numba's threads.
+    """:func:`ball_rows` from every source, the sources split over the worker threads
+    (:func:`intrinsym._threads.map_ranges`).
 
     Returns
     -------
@@ -358,7 +359,7 @@ def ball_pairs(
     graph: tuple[np.ndarray, np.ndarray, np.ndarray], sources: np.ndarray, limit: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Graph-geodesic distances from ``sources`` to every vertex within ``limit``, as
-    sparse triples (:func:`balls` on Numba's threads; SciPy's ``dijkstra`` holds the GIL
+    sparse triples (:func:`balls` on the worker threads; SciPy's ``dijkstra`` holds the GIL
     and fills every row to the graph's size).
 
     Parameters

@@ -3,7 +3,7 @@
 A kernel over independent rows that runs a few times per ``detect`` is compiled as a
 serial ``nogil`` function of a row range ``[lo, hi)`` and run here on a thread pool,
 instead of as a ``prange`` loop: Numba's parallel transform costs 1-4 s of compilation
-per kernel on the first run after install (about 14 s over the descriptor, descent and
+per kernel on the first run after install (about 12 s over the descriptor, descent and
 BP kernels), and the threads reach the same speed. A kernel called thousands of times on
 short blocks (:func:`intrinsym.neighbours.nearest_rows`) keeps ``prange``: a GIL
 handoff per piece costs more there than the compilation.
