@@ -40,9 +40,8 @@ def split(n: int, n_parts: int) -> list[tuple[int, int]]:
 
 
 def worker_pool() -> ThreadPoolExecutor:
-    """A pool of :func:`n_workers` threads for many :func:`map_ranges` calls in a row:
-    starting the threads anew for each call costs more than short calls compute (16
-    threads, a thousand calls: seconds)."""
+    """A pool of :func:`n_workers` threads shared by several :func:`map_ranges` calls in a
+    row (BP's sweep makes three per batch), so that they start their threads once."""
     return ThreadPoolExecutor(n_workers())
 
 
