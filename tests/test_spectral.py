@@ -57,6 +57,28 @@ def test_nearest_images_is_the_exact_nearest_neighbour():
     np.testing.assert_array_equal(spectral.nearest_images(source, target, C), expected)
 
 
+def test_seed_map_leaves_out_the_pairs_it_cannot_explain():
+    """Pairs of a known functional map with small noise, and a tenth of them wrong in
+    the same way (a part mapped elsewhere as a whole): the trimmed fit recovers the map
+    and names the wrong pairs; the plain least squares is pulled off."""
+    rng = np.random.default_rng(5)
+    source = rng.standard_normal((200, 8))
+    truth = np.linalg.qr(rng.standard_normal((8, 8)))[0]
+    target = source @ truth + 1e-3 * rng.standard_normal((200, 8))
+    wrong = np.zeros(200, dtype=bool)
+    wrong[rng.choice(200, 20, replace=False)] = True
+    target[wrong] = source[wrong] @ np.linalg.qr(rng.standard_normal((8, 8)))[0]
+    plain, all_kept = spectral.seed_map(source, target, trim=0.0)
+    np.testing.assert_array_equal(plain, np.linalg.lstsq(source, target, rcond=None)[0])
+    assert all_kept.all() and np.abs(plain - truth).max() > 0.05
+    C, kept = spectral.seed_map(source, target)
+    np.testing.assert_array_equal(kept, ~wrong)
+    assert np.abs(C - truth).max() < 1e-3
+    # noise alone: no pair is left out
+    C, kept = spectral.seed_map(source, source @ truth + 1e-3 * rng.standard_normal((200, 8)))
+    assert kept.all() and np.abs(C - truth).max() < 1e-3
+
+
 @pytest.mark.parametrize("involution", [False, True])
 def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror, involution):
     from intrinsym import laplacian

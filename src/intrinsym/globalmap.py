@@ -105,7 +105,8 @@ def zoomout_map(
     """The symmetry's sample pairs refined by seeded ZoomOut, as the image of every input
     vertex.
 
-    Two fits of the first ``p.zoomout_seed`` eigenfunctions to the pairs, each refined
+    Two fits of the first ``p.zoomout_seed`` eigenfunctions to the pairs (without the
+    pairs the fit cannot explain, :func:`intrinsym.spectral.seed_map`), each refined
     up to ``p.zoomout_final`` (:func:`intrinsym.spectral.seeded_functional_maps` on the
     working shape): one as the symmetry is (plain), one as its own inverse (every pair
     also reversed, ``involution=True``), which holds for a reflection and keeps the fit

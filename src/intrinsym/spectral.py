@@ -52,11 +52,19 @@ from scipy.spatial.distance import pdist
 
 from . import laplacian, neighbours, sampling
 
+#: A seed pair whose residual under the seed's functional map exceeds this many times
+#: the median residual of the pairs kept is left out of the fit (:func:`seed_map`).
+SEED_TRIM = 3.0
+#: Most refits of :func:`seed_map`; it stops earlier once the pairs kept stay the same.
+SEED_TRIM_ROUNDS = 3
+
 __all__ = [
+    "SEED_TRIM",
     "distortion",
     "isolated_eigenvalues",
     "map_points",
     "nearest_images",
+    "seed_map",
     "seeded_functional_maps",
     "seeded_symmetry",
     "sign_candidates",
@@ -367,6 +375,50 @@ def symmetry_candidates(
     return maps, distortions
 
 
+def seed_map(
+    source: np.ndarray, target: np.ndarray, trim: float = SEED_TRIM, rounds: int = SEED_TRIM_ROUNDS
+) -> tuple[np.ndarray, np.ndarray]:
+    """The least-squares functional map of seed pairs, refitted without the pairs it
+    cannot explain.
+
+    ``C`` solves ``target ~ source C``; each pair's residual is the norm of its row of
+    ``source C - target``, and the pairs above ``trim`` times the median residual of the
+    pairs kept are left out of the next fit, up to ``rounds`` refits. A few wrong pairs
+    that agree with each other pull the low-frequency fit, and ZoomOut then keeps their
+    error: on a reflection, the true image of a thin part on the mirror plane (a cat's
+    tail) lies inside the trivial disc the model removes, so BP maps the whole part
+    elsewhere, and those pairs stand out with residuals several times the median
+    (measured in docs/results.md).
+
+    Parameters
+    ----------
+    source, target : (P, k) float arrays
+        Eigenfunctions at the pairs' sources and targets, P >= k.
+    trim : float
+        Residual factor over the median; 0 for the plain least squares.
+    rounds : int
+        Most refits.
+
+    Returns
+    -------
+    C : (k, k) float64
+    kept : (P,) bool
+        The pairs of the last fit.
+    """
+    source = np.asarray(source, dtype=np.float64)
+    target = np.asarray(target, dtype=np.float64)
+    kept = np.ones(len(source), dtype=bool)
+    C = np.linalg.lstsq(source, target, rcond=None)[0]
+    for _ in range(rounds if trim > 0 else 0):
+        residual = np.linalg.norm(source @ C - target, axis=1)
+        inliers = residual <= trim * np.median(residual[kept])
+        if np.array_equal(inliers, kept) or inliers.sum() < source.shape[1]:
+            break
+        kept = inliers
+        C = np.linalg.lstsq(source[kept], target[kept], rcond=None)[0]
+    return C, kept
+
+
 def seeded_functional_maps(
     vertices: np.ndarray,
     evecs: np.ndarray,
@@ -379,6 +431,7 @@ def seeded_functional_maps(
     involutions: tuple[bool, ...] = (False,),
     target_vertices: np.ndarray | None = None,
     target_evecs: np.ndarray | None = None,
+    trim: float = SEED_TRIM,
 ) -> list[np.ndarray]:
     """The functional map of :func:`seeded_symmetry`, before its last point map: one per
     entry of ``involutions`` (the samples and the seed shared).
@@ -392,6 +445,9 @@ def seeded_functional_maps(
         the reversed pairs too (:func:`zoomout`; self-maps only).
     target_vertices, target_evecs
         As in :func:`seeded_symmetry`.
+    trim : float
+        The seed's functional map leaves out the pairs whose residual exceeds ``trim``
+        times the median (:func:`seed_map`); 0 keeps every pair.
 
     Returns
     -------
@@ -421,7 +477,7 @@ def seeded_functional_maps(
     else:
         psi = np.asarray(target_evecs, dtype=np.float64)[:, 1 : n_final + 1]
         target_spread = _spread(np.asarray(target_vertices, dtype=np.float64), n_samples, n_targets, n_final)[0]
-    C = np.linalg.lstsq(phi[source, :k_seed], psi[target, :k_seed], rcond=None)[0]
+    C = seed_map(phi[source, :k_seed], psi[target, :k_seed], trim)[0]
     samples = phi[spread[:n_samples]]
     targets = psi[target_spread]
     start = nearest_images(samples, targets, C)
@@ -447,7 +503,8 @@ def seeded_symmetry(
 
     The correspondences choose the symmetry, ZoomOut gives the precision: the functional
     map ``C`` (k_seed x k_seed) is the least-squares solution of ``phi[target, :k_seed]
-    ~ phi[source, :k_seed] C``, it maps the ``n_samples`` farthest-point samples into
+    ~ phi[source, :k_seed] C`` without the pairs it cannot explain (:func:`seed_map`),
+    it maps the ``n_samples`` farthest-point samples into
     the ``n_targets`` farthest-point targets, ZoomOut refines from ``k_seed`` to
     ``n_final`` eigenfunctions (:func:`zoomout`), and its last ``C``
     (:func:`seeded_functional_maps`) maps every vertex.
