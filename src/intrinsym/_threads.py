@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from concurrent.futures import Executor, ThreadPoolExecutor
+from contextlib import nullcontext
 from typing import Any, TypeVar
 
 import numba as nb
@@ -65,7 +66,5 @@ def map_ranges(
     ranges = split(n, pieces_per_worker * workers)
     if workers == 1 or len(ranges) <= 1:
         return [fn(lo, hi, *args) for lo, hi in ranges]
-    if pool is not None:
-        return list(pool.map(lambda r: fn(r[0], r[1], *args), ranges))
-    with worker_pool() as own:
-        return list(own.map(lambda r: fn(r[0], r[1], *args), ranges))
+    with worker_pool() if pool is None else nullcontext(pool) as threads:
+        return list(threads.map(lambda r: fn(r[0], r[1], *args), ranges))

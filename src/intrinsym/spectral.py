@@ -60,6 +60,7 @@ SEED_TRIM_ROUNDS = 3
 
 __all__ = [
     "SEED_TRIM",
+    "SEED_TRIM_ROUNDS",
     "distortion",
     "isolated_eigenvalues",
     "map_points",
