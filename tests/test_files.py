@@ -1,12 +1,14 @@
 import os
 import subprocess
 import sys
+import zipfile
 
+import numpy as np
 import pytest
 
 from intrinsym import files
 from intrinsym.errors import OutputError
-from intrinsym.files import atomic_write, write_set
+from intrinsym.files import atomic_write, save_npz, write_set
 
 
 def test_atomic_write_writes_with_umask_permissions(tmp_path):
@@ -135,3 +137,24 @@ def test_output_check_reports_an_unwritable_folder(tmp_path, monkeypatch):
         files.check_output_file(tmp_path / "v.html")
     with pytest.raises(OutputError, match=r"no folder"):
         files.check_output_file(tmp_path / "missing" / "v.html")
+
+
+def test_save_npz_reads_back_as_numpys_own_archive(tmp_path):
+    rng = np.random.default_rng(0)
+    arrays = {
+        "floats": rng.standard_normal((300, 40)).astype(np.float32),
+        "ints": np.arange(5000, dtype=np.int64).reshape(100, 50)[:, ::2],
+        "scalar": np.float64(0.25),
+        "flag": np.bool_(True),
+        "empty": np.zeros((0, 3), dtype=np.int32),
+    }
+    save_npz(tmp_path / "ours.npz", arrays)
+    np.savez_compressed(tmp_path / "numpy.npz", **arrays)
+    with np.load(tmp_path / "ours.npz") as ours, np.load(tmp_path / "numpy.npz") as theirs:
+        assert ours.files == theirs.files == list(arrays)
+        for name in arrays:
+            assert ours[name].dtype == theirs[name].dtype
+            np.testing.assert_array_equal(ours[name], theirs[name])
+    with zipfile.ZipFile(tmp_path / "ours.npz") as archive:
+        ints = archive.getinfo("ints.npy")
+        assert ints.compress_type == zipfile.ZIP_DEFLATED and ints.compress_size < ints.file_size / 2

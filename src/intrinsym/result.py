@@ -22,7 +22,7 @@ from . import model, records
 from .confidence import calibrated, disagreement, map_mass, round_trip, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
-from .files import Writer, write_set
+from .files import Writer, save_npz, write_set
 from .params import Params
 from .runinfo import RunInfo
 from .support import Support
@@ -248,7 +248,7 @@ class Result:
             return write
 
         writers: dict[str, Writer] = {
-            "result.npz": lambda path: np.savez_compressed(path, **arrays),
+            "result.npz": lambda path: save_npz(path, arrays),
             "run.json": write_json(run, indent=2),
         }
         if self.support is not None and self.extraction is not None:
