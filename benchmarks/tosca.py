@@ -23,7 +23,9 @@ the share of vertex pairs within 0.5 whose geodesic distance the map changes by 
 than 0.05, which tells how near to an isometry the pose keeps its symmetry),
 the global/partial decision and the statistics behind it (the share of source edges
 BP's argmax keeps, the share of source samples it returns to when applied twice, and
-whether the identity was kept as "no partner"), BP iterations,
+whether the identity was kept as "no partner"), how the global map was chosen
+(``run.json``'s ``global_map``: the marginal mass each candidate keeps) with the
+extraction's map scored alone (``extraction_map`` in the cache), BP iterations,
 seconds per stage and in total (the wall time of the ``detect`` call), and the
 baseline's map scores and seconds (``spectral_symmetry`` alone). Command::
 
@@ -90,7 +92,7 @@ MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
 #: The involution statistic in the summary's words.
 _INVOLUTION = f"share of source samples BP's argmax, applied twice, returns to within {INVOLUTION_RADIUS}"
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 4
+CACHE_FORMAT = 5
 
 
 # --------------------------------------------------------------------------- shapes
@@ -323,6 +325,12 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     row["truth_distortion"] = distortion.map_distortion(sym, shape, seed=seed).as_dict()
     row["reliability"] = reliability(result, shape, sym) if row["global_found"] else None
     row["decision"] = decision(info)
+    choice = field(info, "global_map")
+    if choice is not None and not isinstance(choice, Mapping):
+        choice = dataclasses.asdict(choice)
+    row["global_map"] = None if choice is None else dict(choice)
+    if row["global_found"]:
+        row["extraction_map"] = _map_row(evaluate.score_map(np.asarray(result.extraction_map()), shape, sym))
     row["bp_iterations"] = field(info, "bp", "iterations")
     row["bp_converged"] = field(info, "bp", "converged")
     seconds = field(info, "seconds", default={})
