@@ -29,7 +29,7 @@ from .errors import OutputError, path_label
 Writer = Callable[[Path], None]
 
 #: Deflate level of :func:`save_npz`. Level 1 writes a default-size result.npz (17 MB of
-#: float arrays) 2.5x faster than NumPy's ``savez_compressed`` (zlib's level 6) for a
+#: float arrays) 2.6x faster than NumPy's ``savez_compressed`` (zlib's level 6) for a
 #: file 2 % larger: float noise barely compresses at any level (docs/benchmarks.md).
 NPZ_LEVEL = 1
 
