@@ -326,9 +326,7 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     row["reliability"] = reliability(result, shape, sym) if row["global_found"] else None
     row["decision"] = decision(info)
     choice = field(info, "global_map")
-    if choice is not None and not isinstance(choice, Mapping):
-        choice = dataclasses.asdict(choice)
-    row["global_map"] = None if choice is None else dict(choice)
+    row["global_map"] = choice if choice is None or isinstance(choice, Mapping) else dataclasses.asdict(choice)
     if row["global_found"]:
         row["extraction_map"] = _map_row(evaluate.score_map(np.asarray(result.extraction_map()), shape, sym))
     row["bp_iterations"] = field(info, "bp", "iterations")
