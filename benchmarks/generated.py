@@ -356,8 +356,8 @@ def _decision(identity) -> str:
     """The identity decision of ``auto`` in words: the weight and both statistics."""
     if identity is None:
         return "None"
-    share, returned = (np.nan if v is None else v for v in (identity.isometry, identity.involution))
-    return f"{identity.weight} ({share:.2f} < {identity.threshold}, {returned:.2f} < {identity.involution_threshold})"
+    share, reflection = (np.nan if v is None else v for v in (identity.isometry, identity.reflection))
+    return f"{identity.weight} ({share:.2f} < {identity.threshold}, {reflection:.2f} < {identity.reflection_threshold})"
 
 
 def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
@@ -375,7 +375,7 @@ def run_partial(report: Report, sizes: tuple[int, int], cache: Path | None, over
         identity = result.info.identity
         report.add(
             name,
-            "trivial weight (auto: argmax edges kept, samples returned)",
+            "trivial weight (auto: argmax edges kept, reflection share)",
             f"{result.params.trivial_weight} -> {_decision(identity)}",
             None,
         )

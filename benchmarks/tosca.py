@@ -76,7 +76,7 @@ import numpy as np
 
 import intrinsym
 from intrinsym import distortion, evaluate, geodesics, spectral
-from intrinsym.params import INVOLUTION_RADIUS
+from intrinsym.params import RETURN_RADIUS
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
 REFLECTION = {
@@ -89,10 +89,13 @@ REFLECTION = {
 REFLECTION_CLASS = "reflection"
 #: Marginal scores shown in the table (``score_marginals`` also gives breadth, kept in JSON).
 MARGINAL = ("mirror_hit", "peak_recall", "decoy_recall")
-#: The involution statistic in the summary's words.
-_INVOLUTION = f"share of source samples BP's argmax, applied twice, returns to within {INVOLUTION_RADIUS}"
+#: The reflection statistic in the summary's words.
+_REFLECTION = (
+    f"share of source samples BP's argmax returns to within {RETURN_RADIUS} when applied twice "
+    "and turns around (neighbours' order reversed)"
+)
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 5
+CACHE_FORMAT = 6
 
 
 # --------------------------------------------------------------------------- shapes
@@ -181,18 +184,18 @@ def decision(info) -> dict:
     """
     record = field(info, "identity") or field(info, "decision")
     if record is None:
-        return {"statistic": None, "threshold": None, "involution": None, "identity_kept": None}
+        return {"statistic": None, "threshold": None, "reflection": None, "identity_kept": None}
     statistic = field(record, "isometry", default=field(record, "statistic"))
     kept = field(record, "identity_kept", default=field(record, "kept"))
     if kept is None:
         weight = field(record, "weight")
         kept = None if weight is None else float(weight) > 0
-    involution = field(record, "involution")
+    reflection = field(record, "reflection")
     return {
         "statistic": None if statistic is None else float(statistic),
         "threshold": field(record, "threshold"),
-        "involution": None if involution is None else float(involution),
-        "involution_threshold": field(record, "involution_threshold"),
+        "reflection": None if reflection is None else float(reflection),
+        "reflection_threshold": field(record, "reflection_threshold"),
         "identity_kept": None if kept is None else bool(kept),
     }
 
@@ -418,7 +421,7 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
         ("truth distortion", ("truth_distortion", "above_0.05"), False, ".3f"),
         ("global found", ("global_found",), True, "bool"),
         ("identity share", ("decision", "statistic"), True, ".3f"),
-        ("involution", ("decision", "involution"), True, ".3f"),
+        ("reflection", ("decision", "reflection"), True, ".3f"),
         ("identity kept", ("decision", "identity_kept"), False, "bool"),
         ("BP it.", ("bp_iterations",), False, "d"),
         ("spectral ≤0.05", ("spectral", "within_0.05"), True, ".3f"),
@@ -510,10 +513,10 @@ def markdown(rows: list[dict], show_stages: bool = False) -> str:
             lines.append(f"| {cls} worst | " + " | ".join(worsts) + " |")
         out.append("Per class:\n\n" + "\n".join(lines))
 
-    for key, what in (("statistic", "share of source edges BP's argmax keeps"), ("involution", _INVOLUTION)):
+    for key, what in (("statistic", "share of source edges BP's argmax keeps"), ("reflection", _REFLECTION)):
         stats = sorted((_get(r, "decision", key), r["shape"]) for r in ok if _get(r, "decision", key) is not None)
         if stats:
-            bound = "threshold" if key == "statistic" else "involution_threshold"
+            bound = "threshold" if key == "statistic" else "reflection_threshold"
             threshold = next((_get(r, "decision", bound) for r in ok if _get(r, "decision", bound)), None)
             out.append(
                 f"Decision statistic ({what}"

@@ -38,7 +38,7 @@ def test_detect_trivial_weight(tmp_path):
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
     run_json = json.loads((out / "run.json").read_text())
     assert run_json["params"]["trivial_weight"] == 0.5 and run_json["identity"] == {"weight": 0.5}
-    # auto: a threshold no BP argmax reaches keeps the identity at the fallback weight
+    # auto: thresholds no BP argmax reaches keep the identity at the fallback weight
     assert (
         cli.main(
             [
@@ -52,12 +52,15 @@ def test_detect_trivial_weight(tmp_path):
                 "auto",
                 "--isometry-threshold",
                 "1.0",
+                "--reflection-threshold",
+                "1.0",
             ]
         )
         == 0
     )
     identity = json.loads((out / "run.json").read_text())["identity"]
-    assert identity["isometry"] < 1.0 and identity["weight"] == intrinsym.params.NO_PARTNER_WEIGHT
+    assert identity["isometry"] < 1.0 and identity["reflection"] < 1.0
+    assert identity["weight"] == intrinsym.params.NO_PARTNER_WEIGHT
     p = run("detect", "--example", "-o", tmp_path / "bad", "--trivial-weight", "some")
     assert p.returncode == 2 and "expected 'auto' or a number, got 'some'" in p.stderr
     assert not (tmp_path / "bad").exists()

@@ -22,7 +22,6 @@ from intrinsym.extract import (
     consistency,
     extract,
     grow,
-    involution,
     nearest_targets,
     normalise_rows,
     peaks,
@@ -86,22 +85,6 @@ def test_consistency_counts_the_edges_a_map_keeps():
     fold = np.where(np.arange(S) < 5, IDENTITY, MIRROR)
     assert consistency(fold, GRAPH, TARGETS, 0.05) == 0.8
     assert consistency(np.full(S, -1), GRAPH, TARGETS, 0.02) == 1.0
-
-
-def test_involution_counts_the_round_trips_that_return():
-    # the targets on a circle of circumference 1, the sources on every fourth
-    angle = 2 * np.pi * np.arange(T) / T
-    points = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(T)]) / (2 * np.pi)
-    src = points[IDENTITY]
-    assert involution(MIRROR, src, points, 0.05) == 1.0
-    half_turn, quarter_turn = (IDENTITY + T // 2) % T, (IDENTITY + T // 4) % T
-    assert involution(half_turn, src, points, 0.05) == 1.0  # of order two, like a reflection
-    assert involution(quarter_turn, src, points, 0.05) == 0.0  # twice: the half turn
-    # sample 3 sent 8 targets further, onto sample 0: its trip ends at sample 1, and the
-    # trip of sample 8 (whose image is sample 3) at sample 0, both a chord of 0.187 away
-    moved = MIRROR.copy()
-    moved[3] = (moved[3] + 8) % T
-    assert involution(moved, src, points, 0.1) == 0.8 and involution(moved, src, points, 0.2) == 1.0
 
 
 def test_peaks_threshold_and_suppression():

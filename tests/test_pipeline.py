@@ -64,7 +64,24 @@ def test_result_contract(spot, spot_result, tmp_path):
         )
     assert (out / "symmetry_mass.npy").is_file()
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
-    assert json.loads((out / "run.json").read_text())["format_version"] == 2
+    assert json.loads((out / "run.json").read_text())["format_version"] == 3
+
+
+def test_a_format_2_folder_loads_without_its_involution(spot_result, tmp_path):
+    # format 2 recorded the round trip alone (involution, involution_threshold), which
+    # format 3's reflection test replaced: such a folder loads, without that statistic
+    out = spot_result.save(tmp_path / "v2")
+    run = json.loads((out / "run.json").read_text())
+    run["format_version"] = 2
+    run["params"]["involution_threshold"] = run["params"].pop("reflection_threshold")
+    identity = run["identity"]
+    identity["involution"], identity["involution_threshold"] = identity.pop("reflection"), 0.78
+    del identity["reflection_threshold"]
+    (out / "run.json").write_text(json.dumps(run))
+    again = intrinsym.Result.load(out)
+    assert again.params == spot_result.params
+    assert again.info.identity.reflection is None and again.info.identity.weight == spot_result.info.identity.weight
+    assert np.array_equal(again.marginals, spot_result.marginals)
 
 
 def test_global_map_is_spots_reflection(spot, spot_result):
@@ -139,7 +156,7 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     removed = spot_result  # the default ("auto") removes it: spot's mirror is a near-isometry
     identity = removed.info.identity
     assert identity.weight == 0.0 and identity.isometry >= identity.threshold, identity
-    assert identity.involution >= identity.involution_threshold, identity  # a reflection: its own inverse
+    assert identity.reflection >= identity.reflection_threshold, identity  # its own inverse, orientation reversed
     weighted = intrinsym.detect(spot, intrinsym.make_params(trivial_weight=0.7, **SMALL))
     assert np.array_equal(kept.target_point_vertex, removed.target_point_vertex)
     floor = np.float32(removed.info.resolved.unary_floor)
@@ -193,8 +210,8 @@ def test_paper_preset():
     for bad in (-0.1, 1.5):
         with pytest.raises(intrinsym.ParameterError, match="isometry_threshold"):
             intrinsym.params.make_params(isometry_threshold=bad)
-        with pytest.raises(intrinsym.ParameterError, match="involution_threshold"):
-            intrinsym.params.make_params(involution_threshold=bad)
+        with pytest.raises(intrinsym.ParameterError, match="reflection_threshold"):
+            intrinsym.params.make_params(reflection_threshold=bad)
 
 
 def test_point_cloud_input(spot):

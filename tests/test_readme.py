@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from intrinsym.runinfo import FORMAT_VERSION
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 DOCS = sorted((ROOT / "docs").glob("*.md"))
@@ -122,7 +124,7 @@ def test_readme_quick_start_runs(
     out = tmp_path / saved[0]
     for name in ("result.npz", "run.json", "symmetries.json", "symmetry_map.npy"):
         assert (out / name).is_file(), f"the quick start did not write {name}"
-    assert json.loads((out / "run.json").read_text())["format_version"] == 2
+    assert json.loads((out / "run.json").read_text())["format_version"] == FORMAT_VERSION
 
     r = namespace["r"]
     assert r.marginals.shape == (namespace["S"], namespace["T"])

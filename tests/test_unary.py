@@ -207,7 +207,7 @@ def test_the_weighted_identity_keeps_off_limb_points_home_and_limbs_on_each_othe
     # "auto" sees that the removed identity's BP map is no near-isometry, nor its own
     # inverse (measured: 0.79 of the edges kept, 0.71 of the samples returned), and keeps it
     identity = weighted.info.identity
-    assert identity.isometry < identity.threshold and identity.involution < identity.involution_threshold
+    assert identity.isometry < identity.threshold and identity.reflection < identity.reflection_threshold
     assert identity.weight == intrinsym.params.NO_PARTNER_WEIGHT
     assert weighted.extraction.params.no_partner and not removed.extraction.params.no_partner
     hit_removed, _, off_removed, body_removed = partial_scores(g, removed)

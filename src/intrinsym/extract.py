@@ -43,7 +43,6 @@ __all__ = [
     "extract",
     "extract_from_support",
     "grow",
-    "involution",
     "is_identity",
     "nearest_targets",
     "normalise_rows",
@@ -257,35 +256,6 @@ def consistency(image: np.ndarray, graph: SourceGraph, targets: SparseDistances,
         image, image, True, graph.ptr, graph.neighbour, graph.length, t.indptr, t.indices, t.dist, tolerance, 0.0
     )
     return good / (good + bad) if good + bad else 1.0
-
-
-def involution(image: np.ndarray, source_points: np.ndarray, target_points: np.ndarray, radius: float) -> float:
-    """Share of the source samples that a map returns to: ``T(T(s))`` near ``s``.
-
-    A reflective symmetry is its own inverse, so the round trip ends where it started;
-    nothing in the model makes a self-map invented on a shape without one its own
-    inverse. The trip goes from sample ``s`` to target ``image[s]``, then from the source
-    sample nearest that target to its image.
-
-    Parameters
-    ----------
-    image : (S,) int64
-        Target sample of each source sample (self-matching: both sets on one surface).
-    source_points, target_points : (S, 3), (T, 3) float arrays
-        Positions (length units of ``radius``).
-    radius : float
-        A trip ending within this (Euclidean) distance of its start returns.
-
-    Returns
-    -------
-    float in [0, 1]
-    """
-    image = np.asarray(image, dtype=np.int64)
-    src = np.asarray(source_points, dtype=np.float64)
-    tgt = np.asarray(target_points, dtype=np.float64)
-    _, back = cKDTree(src).query(tgt[image])
-    end = tgt[image[back]]
-    return float(np.mean(np.linalg.norm(end - src, axis=1) < radius))
 
 
 def _make(

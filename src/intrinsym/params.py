@@ -29,8 +29,8 @@ UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
 #: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity.
 NO_PARTNER_WEIGHT = 0.7
 #: A round trip through BP's argmax "returns" within this distance (sqrt(area) units) of
-#: its start, for ``involution_threshold`` (:func:`intrinsym.extract.involution`).
-INVOLUTION_RADIUS = 0.1
+#: its start, for ``reflection_threshold`` (:func:`intrinsym.reflection.returns`).
+RETURN_RADIUS = 0.1
 #: The global map is seeded ZoomOut's (vertex-precise) unless it keeps this much less
 #: marginal mass (within ``mass_radius``) than the extraction's map (resolved to the
 #: sample spacing); a spectral candidate replaces the model's map only when it keeps this
@@ -234,8 +234,8 @@ class Params:
         "auto",
         "the trivial match's largest unary as a fraction of the row's largest elsewhere, in [0, 1); 0 "
         "removes it, above 0 it stays as the answer 'no symmetric partner'; 'auto': 0, unless BP's argmax "
-        "keeps fewer than --isometry-threshold of the source edges' lengths and returns fewer than "
-        "--involution-threshold of the samples, then BP runs again at 0.7",
+        "keeps fewer than --isometry-threshold of the source edges' lengths and acts as a reflection on "
+        "fewer than --reflection-threshold of the samples, then BP runs again at 0.7",
         "trivial match",
         self_match=True,
     )
@@ -243,15 +243,15 @@ class Params:
         0.85,
         "share of source edges whose length BP's argmax keeps within --d-error or "
         "one target spacing, below which --trivial-weight auto keeps the identity (unless "
-        "--involution-threshold is met)",
+        "--reflection-threshold is met)",
         "trivial match",
         self_match=True,
     )
-    involution_threshold: float = _p(
-        0.78,
-        f"share of source samples that BP's argmax, applied twice, returns to within {INVOLUTION_RADIUS} "
-        "(a reflection is its own inverse), from which --trivial-weight auto removes the identity whatever "
-        "--isometry-threshold says",
+    reflection_threshold: float = _p(
+        0.55,
+        "share of source samples at which BP's argmax acts as a reflection (applied twice, it returns them "
+        f"to within {RETURN_RADIUS}, and it reverses the order of their neighbours around them), from which "
+        "--trivial-weight auto removes the identity whatever --isometry-threshold says",
         "trivial match",
         self_match=True,
     )
@@ -363,7 +363,7 @@ class Params:
                 "trivial_weight must be 'auto' or lie in [0, 1)",
             ),
             (not 0 <= self.isometry_threshold <= 1, "isometry_threshold must lie in [0, 1]"),
-            (not 0 <= self.involution_threshold <= 1, "involution_threshold must lie in [0, 1]"),
+            (not 0 <= self.reflection_threshold <= 1, "reflection_threshold must lie in [0, 1]"),
             (not 0 <= self.fallback_mass <= 1, "fallback_mass must lie in [0, 1]"),
             (not self.mass_radius > 0, "mass_radius must be positive"),
             (self.passes is not None and self.passes < 1, "passes must be at least 1"),

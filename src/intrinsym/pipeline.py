@@ -21,10 +21,11 @@ import numpy as np
 
 from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
-from .extract import Extraction, consistency, extract_from_support, involution
+from .extract import Extraction, consistency, extract_from_support
 from .globalmap import choose_global_map
-from .params import INVOLUTION_RADIUS, NO_PARTNER_WEIGHT, OFFSET_TARGETS, Params, make_params
+from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, RETURN_RADIUS, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
+from .reflection import reflection
 from .result import Result
 from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
 from .support import SourceGraph, Support
@@ -259,8 +260,9 @@ def decide_identity(
     outcome: BPOutcome,
     p: Params,
     t_spacing: float,
-    source_points: np.ndarray,
-    target_points: np.ndarray,
+    src: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
 ) -> IdentityDecision:
     """The decision of ``trivial_weight="auto"`` on an identity-removed BP outcome: the
     weight the trivial match gets (0: a global symmetry, ``NO_PARTNER_WEIGHT``: partial).
@@ -269,21 +271,24 @@ def decide_identity(
     global symmetry BP invents a self-map that keeps short distances only roughly; a true,
     posed symmetry's argmax keeps nearly all of them (within ``d_error`` or the target
     spacing ``t_spacing``). Where the unary is weak (strongly posed shapes) it keeps
-    fewer, but a reflection's argmax still returns most samples to themselves when applied
-    twice, which an invented self-map does not: either test makes the symmetry global.
+    fewer, but a reflection's argmax still acts as one at most samples (its own inverse,
+    the surface's orientation reversed: :func:`intrinsym.reflection.reflection`), which
+    an invented self-map does not: either test makes the symmetry global. Self-matching:
+    ``ps`` and ``pt`` are working vertices of ``src``.
     """
     image = outcome.marginals.argmax(axis=1)
     graph = SourceGraph.from_edges(edges, edge_length, len(outcome.marginals))
     kept = consistency(image, graph, pair.targets, max(p.d_error, t_spacing))
-    returned = involution(image, source_points, target_points, INVOLUTION_RADIUS)
-    partial = kept < p.isometry_threshold and returned < p.involution_threshold
+    vertices, normals = src.shape.vertices, src.normals
+    acts = reflection(image, edges, vertices[ps], vertices[pt], normals[ps], normals[pt], RETURN_RADIUS)
+    partial = kept < p.isometry_threshold and acts < p.reflection_threshold
     return IdentityDecision(
         NO_PARTNER_WEIGHT if partial else 0.0,
         kept,
         p.isometry_threshold,
         outcome.runs[0].iterations if partial else None,
-        returned,
-        p.involution_threshold,
+        acts,
+        p.reflection_threshold,
     )
 
 
@@ -321,8 +326,7 @@ def _solve(
     clock.lap("unary")
     outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
     if outcome.identity is not None and p.trivial_weight == "auto":
-        source_points, target_points = src.shape.vertices[ps], tgt.shape.vertices[pt]
-        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, source_points, target_points)
+        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, src, ps, pt)
         if identity.weight > 0:
             outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
         outcome = dataclasses.replace(outcome, identity=identity)

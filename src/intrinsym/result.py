@@ -2,7 +2,7 @@
 ``symmetries.json`` and ``symmetry_map.npy`` (``docs/format.md``).
 
 :meth:`Result.save` writes a folder, :meth:`Result.load` reads one, including folders of
-format version 1 (before ``run.json`` had a ``format_version``).
+the older format versions :mod:`intrinsym.runinfo` reads.
 """
 
 from __future__ import annotations
@@ -294,7 +294,10 @@ class Result:
                 zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
             name = out / "run.json"
             run = json.loads(name.read_text())
-            params = Params(**run.pop("params"))
+            stored = run.pop("params")
+            if run.get("format_version", 1) < 3:
+                stored.pop("involution_threshold", None)  # replaced by reflection_threshold
+            params = Params(**stored)
             info = RunInfo.from_dict(run)
         except _UNREADABLE as err:
             reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"

@@ -2,8 +2,9 @@
 BP statistics, the identity decision, the ZoomOut guard, inputs and versions.
 
 Every record is a frozen dataclass; :meth:`RunInfo.to_dict` / :meth:`RunInfo.from_dict`
-are the JSON form (format :data:`FORMAT_VERSION`; version-1 files, written before the
-field had a version, load too).
+are the JSON form (format :data:`FORMAT_VERSION`; older files load too: version 1, written
+before the field had a version, and version 2, whose identity decision recorded the round
+trip alone as ``involution``, dropped on reading).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import Any
 import numpy as np
 
 #: Version of the result folder's format (``run.json``'s ``format_version``).
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -126,10 +127,10 @@ class IdentityDecision:
         The threshold it was compared with.
     removed_iterations : int or None
         BP iterations of the run with the identity removed, when BP ran again with it kept.
-    involution : float or None
-        With ``trivial_weight="auto"``: the share of source samples BP's argmax, applied
-        twice, returned to (:func:`intrinsym.extract.involution`).
-    involution_threshold : float or None
+    reflection : float or None
+        With ``trivial_weight="auto"``: the share of source samples at which BP's argmax
+        acted as a reflection (:func:`intrinsym.reflection.reflection`).
+    reflection_threshold : float or None
         The threshold it was compared with.
     """
 
@@ -137,8 +138,8 @@ class IdentityDecision:
     isometry: float | None = None
     threshold: float | None = None
     removed_iterations: int | None = None
-    involution: float | None = None
-    involution_threshold: float | None = None
+    reflection: float | None = None
+    reflection_threshold: float | None = None
 
 
 @dataclass(frozen=True)
@@ -240,15 +241,18 @@ class RunInfo:
 
     @classmethod
     def from_dict(cls, run: dict[str, Any]) -> RunInfo:
-        """Read :meth:`to_dict`'s form, or a version-1 ``run.json`` (no ``format_version``)."""
+        """Read :meth:`to_dict`'s form, or an older ``run.json`` (see the module)."""
         sizes = dict(run["sizes"])
-        if run.get("format_version", 1) < 2:
+        version = run.get("format_version", 1)
+        if version < 2:
             sizes["source_working_vertices"] = sizes.pop("source_vertices")
             sizes["target_working_vertices"] = sizes.pop("target_vertices")
         bp = dict(run["bp"])
         bp["history"] = tuple(bp.get("history", ()))
         bp["passes"] = tuple(PassStats(**q) for q in bp.get("passes", ()))
         identity = run.get("identity")
+        if identity and version < 3:
+            identity = {k: v for k, v in identity.items() if k not in ("involution", "involution_threshold")}
         zoomout = run.get("zoomout")
         global_map = run.get("global_map")
         return cls(
