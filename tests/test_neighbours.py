@@ -2,11 +2,29 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from intrinsym import laplacian, neighbours, shapes
+from intrinsym import bp, laplacian, neighbours, shapes
 
 
 def _exact(query, basis):
     return cKDTree(basis).query(query)[1]
+
+
+def _dense(xp_name):
+    def search(query, basis):
+        xp = np if xp_name == "numpy" else pytest.importorskip("cupy")
+        return neighbours.dense_nearest_rows(query, basis, xp)
+
+    return search
+
+
+#: The clustered CPU search and the dense one, in NumPy and (with a GPU) in CuPy.
+SEARCHES = [
+    pytest.param(neighbours.nearest_rows, id="clusters"),
+    pytest.param(_dense("numpy"), id="dense-numpy"),
+    pytest.param(
+        _dense("cupy"), id="dense-cupy", marks=pytest.mark.skipif(not bp.gpu_available(), reason="no usable GPU")
+    ),
+]
 
 
 @pytest.mark.parametrize("n_clusters", [None, 1, 7, 1500])
@@ -18,7 +36,8 @@ def test_unstructured_rows_match_a_kd_tree(n_clusters):
     np.testing.assert_array_equal(got, _exact(query, basis))
 
 
-def test_a_functional_maps_point_map_matches_a_kd_tree():
+@pytest.mark.parametrize("search", SEARCHES)
+def test_a_functional_maps_point_map_matches_a_kd_tree(search):
     # eigenfunction rows of a star (a surface in 30 dimensions) under the functional map
     # of its rotation, fitted by least squares, plus noise: the case the clusters are for
     shape = shapes.star(arms=5, resolution=16)
@@ -26,10 +45,11 @@ def test_a_functional_maps_point_map_matches_a_kd_tree():
     basis = evecs[:, 1:]
     C = np.linalg.lstsq(basis, basis[shape.symmetries[0]], rcond=None)[0]
     query = basis @ C + 0.02 * np.random.default_rng(1).normal(size=basis.shape)
-    np.testing.assert_array_equal(neighbours.nearest_rows(query, basis), _exact(query, basis))
+    np.testing.assert_array_equal(search(query, basis), _exact(query, basis))
 
 
-def test_rows_far_from_the_origin_do_not_lose_their_nearest_neighbour():
+@pytest.mark.parametrize("search", SEARCHES)
+def test_rows_far_from_the_origin_do_not_lose_their_nearest_neighbour(search):
     # |x|^2 / 2 - q.x in float32 cancels when the rows' norm dwarfs their spacing
     rng = np.random.default_rng(2)
     basis = 1000.0 + rng.uniform(size=(2000, 8))
@@ -38,7 +58,7 @@ def test_rows_far_from_the_origin_do_not_lose_their_nearest_neighbour():
     float32_products = np.argmin(0.5 * np.einsum("ij,ij->i", x32, x32) - q32 @ x32.T, axis=1)
     exact = _exact(query, basis)
     assert np.mean(float32_products != exact) > 0.1
-    np.testing.assert_array_equal(neighbours.nearest_rows(query, basis), exact)
+    np.testing.assert_array_equal(search(query, basis), exact)
 
 
 @pytest.mark.parametrize("scale", [0.9, 1.0])
@@ -48,6 +68,20 @@ def test_exact_ties_go_to_the_smallest_row(scale):
     basis = np.repeat(np.eye(4) * 1000.0, 3, axis=0)
     got = neighbours.nearest_rows(np.eye(4) * 1000.0 * scale, basis, n_clusters=6)
     np.testing.assert_array_equal(got, [0, 3, 6, 9])
+
+
+@pytest.mark.parametrize("search", SEARCHES[1:])
+def test_the_dense_search_hands_unclear_queries_to_the_exact_one(search, monkeypatch):
+    # duplicated rows tie exactly, rows 1e-13 apart tie within rounding: both go to the
+    # clustered search, which returns the smallest of the tied rows; blocks of 7 queries
+    rng = np.random.default_rng(3)
+    basis = rng.normal(size=(300, 6))
+    basis = np.vstack([basis, basis[:20], basis[20:40] + 1e-13])
+    query = np.vstack([basis[:40], rng.normal(size=(60, 6))])
+    monkeypatch.setattr(neighbours, "DENSE_BLOCK_BYTES", 7 * 8 * len(basis))
+    got = search(query, basis)
+    np.testing.assert_array_equal(got[:40], np.arange(40))
+    np.testing.assert_array_equal(got, neighbours.nearest_rows(query, basis))
 
 
 def test_shapes_are_checked():

@@ -101,6 +101,7 @@ def zoomout_map(
     vertex_source: np.ndarray,
     sample_mass: Callable[[np.ndarray], np.ndarray],
     guide: np.ndarray,
+    device: str = "cpu",
 ) -> np.ndarray:
     """The symmetry's sample pairs refined by seeded ZoomOut, as the image of every input
     vertex.
@@ -137,6 +138,9 @@ def zoomout_map(
     guide : (N_in,) int64
         The extraction's image of every input vertex, -1 for none
         (:func:`intrinsym.vertex_maps.fitted_vertex_map`).
+    device : {"cpu", "gpu"}
+        Where ZoomOut's nearest-row searches and the point maps of every input vertex
+        run (:func:`intrinsym.spectral.nearest_images`; the same maps on both).
 
     Returns
     -------
@@ -150,13 +154,14 @@ def zoomout_map(
         p.zoomout_seed,
         p.zoomout_final,
         involutions=(True, False),
+        device=device,
     )
     candidates = np.unique(surface.vertex_map)
 
     def images_of(vertices: np.ndarray, C: np.ndarray) -> np.ndarray:
         """Input vertices -> input-vertex images under the functional map C."""
         points = surface.vertex_map[vertices]
-        return _input_images(surface, spectral.map_points(C, evecs, points, candidates))
+        return _input_images(surface, spectral.map_points(C, evecs, points, candidates, device=device))
 
     masses = [sample_mass(images_of(source_vertex, C)) for C in fits]
     plain_cell = masses[1] > masses[0]
@@ -200,6 +205,7 @@ def choose_global_map(
     fit: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
     spacing: float,
     p: Params,
+    device: str = "cpu",
 ) -> GlobalMap:
     """Score the candidate global maps by the marginal mass they keep; choose one, refine it.
 
@@ -227,6 +233,9 @@ def choose_global_map(
     spacing : float
         Target spacing (sqrt(area) units), the scale of the refinement's tolerance.
     p : Params
+    device : {"cpu", "gpu"}
+        Where the nearest-row searches of ZoomOut and of the point maps run (the same
+        maps on both).
 
     Returns
     -------
@@ -252,10 +261,11 @@ def choose_global_map(
             support.vertex_source,
             cell_mass(marginals, support),
             maps["extraction"],
+            device,
         )
     masses = {name: mass_of(m) for name, m in maps.items()}
     if p.zoomout and spectrum is not None and masses[choose(masses, p.fallback_mass)] < p.fallback_mass:
-        found = best_spectral(surface, source_vertex, spectrum, mass_of, p)
+        found = best_spectral(surface, source_vertex, spectrum, mass_of, p, device)
         if found is not None:
             maps["spectral"], masses["spectral"] = found
     best = choose(masses, p.fallback_mass)
@@ -367,8 +377,10 @@ def best_spectral(
     spectrum: tuple[np.ndarray, np.ndarray],
     mass_of: Callable[[np.ndarray], float],
     p: Params,
+    device: str = "cpu",
 ) -> tuple[np.ndarray, float] | None:
-    """The spectral candidate that keeps the most marginal mass, as an input-vertex map."""
+    """The spectral candidate that keeps the most marginal mass, as an input-vertex map
+    (its last point map's search on ``device``)."""
     evals, evecs = spectrum
     vertices = surface.shape.vertices
     try:
@@ -389,5 +401,5 @@ def best_spectral(
         partial[source_vertex] = _input_images(surface, image)
         masses.append(mass_of(partial))
     best = int(np.argmax(masses))
-    image = candidates[spectral.nearest_images(phi[surface.vertex_map], phi[candidates], maps[best])]
+    image = candidates[spectral.nearest_images(phi[surface.vertex_map], phi[candidates], maps[best], device)]
     return _input_images(surface, image), masses[best]

@@ -6,15 +6,20 @@ dimensions. A k-d tree degrades in these dimensions and exhaustive matrix produc
 ``Q T k`` multiply-adds (and, in float32, lose the nearest row to cancellation: the rows'
 norms are large against their spacing). The rows of an eigenfunction embedding lie on a
 two-dimensional surface, so :func:`nearest_rows` groups them into small clusters, prunes
-whole clusters with the triangle inequality and measures the rest exactly.
+whole clusters with the triangle inequality and measures the rest exactly. On a GPU
+(``device="gpu"``, CuPy) exhaustive float64 products are cheap instead:
+:func:`dense_nearest_rows` takes each query's smallest product distance and sends the few
+queries whose nearest row is not clear beyond rounding to the exact search.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba as nb
 import numpy as np
 
-__all__ = ["nearest_rows"]
+__all__ = ["dense_nearest_rows", "nearest_rows"]
 
 #: Slack of the pruning bound, relative to the best distance and, for queries on a row, to
 #: the largest norm: far above the float64 rounding of the distances to the cluster
@@ -23,6 +28,14 @@ PRUNE_SLACK = 1e-6
 
 #: Queries whose distances to the cluster centres are held at once (x clusters float64).
 CHUNK = 4096
+
+#: Rounding bound of :func:`dense_nearest_rows`, relative to ``|q|^2 + max |x|^2``: far
+#: above the float64 error of a product distance in up to a few hundred dimensions (k
+#: times 1.1e-16).
+DENSE_SLACK = 1e-10
+
+#: Bytes of the (queries x rows) float64 block :func:`dense_nearest_rows` holds at once.
+DENSE_BLOCK_BYTES = 1 << 28
 
 
 # reassociation lets the distance sum vectorise (no early exit: a branch per term is
@@ -96,6 +109,55 @@ def _distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(sq, 0.0))
 
 
+def dense_nearest_rows(query: np.ndarray, basis: np.ndarray, xp: Any = np) -> np.ndarray:
+    """Index of the nearest ``basis`` row of every ``query`` row, by dense products in the
+    array module ``xp`` (CuPy on a GPU, NumPy for the tests); exact as :func:`nearest_rows`.
+
+    ``|x|^2 / 2 - q.x`` over all rows ``x`` of a block of queries, its argmin a candidate.
+    A query for which another row lies within the rounding bound (:data:`DENSE_SLACK`) of
+    the smallest value, the true nearest row among them, goes to :func:`nearest_rows`; for
+    every other query the candidate is the nearest row.
+
+    Parameters
+    ----------
+    query : (Q, k) float array
+    basis : (T, k) float array
+    xp : module
+        ``numpy`` or ``cupy``.
+
+    Returns
+    -------
+    (Q,) int64
+        Nearest row of ``basis`` (the smallest index among exact ties), a NumPy array.
+    """
+    q = np.ascontiguousarray(query, dtype=np.float64)
+    x = np.ascontiguousarray(basis, dtype=np.float64)
+    _check(q, x)
+    to_host = getattr(xp, "asnumpy", np.asarray)
+    rows = xp.asarray(x)
+    half = 0.5 * xp.sum(rows * rows, axis=1)
+    queries = xp.asarray(q)
+    slack = DENSE_SLACK * (xp.sum(queries * queries, axis=1) + 2.0 * half.max())
+    nearest = np.empty(len(q), dtype=np.int64)
+    unclear = np.zeros(len(q), dtype=bool)
+    step = max(1, DENSE_BLOCK_BYTES // (8 * len(x)))
+    for lo in range(0, len(q), step):
+        d = half[None, :] - queries[lo : lo + step] @ rows.T
+        best = xp.argmin(d, axis=1)
+        low = d[xp.arange(len(best)), best] + slack[lo : lo + step]
+        nearest[lo : lo + step] = to_host(best)
+        unclear[lo : lo + step] = to_host(xp.count_nonzero(d <= low[:, None], axis=1) > 1)
+    if unclear.any():
+        nearest[unclear] = nearest_rows(q[unclear], x)
+    return nearest
+
+
+def _check(q: np.ndarray, x: np.ndarray) -> None:
+    """ValueError unless ``q`` (Q, k) and ``x`` (T, k) with T >= 1."""
+    if q.ndim != 2 or x.ndim != 2 or q.shape[1] != x.shape[1] or len(x) == 0:
+        raise ValueError(f"need (Q, k) queries and (T, k) rows, T >= 1; got {q.shape} and {x.shape}")
+
+
 def nearest_rows(query: np.ndarray, basis: np.ndarray, n_clusters: int | None = None) -> np.ndarray:
     """Index of the nearest ``basis`` row of every ``query`` row (Euclidean, exact).
 
@@ -121,8 +183,7 @@ def nearest_rows(query: np.ndarray, basis: np.ndarray, n_clusters: int | None = 
     """
     q = np.ascontiguousarray(query, dtype=np.float64)
     x = np.ascontiguousarray(basis, dtype=np.float64)
-    if q.ndim != 2 or x.ndim != 2 or q.shape[1] != x.shape[1] or len(x) == 0:
-        raise ValueError(f"need (Q, k) queries and (T, k) rows, T >= 1; got {q.shape} and {x.shape}")
+    _check(q, x)
     n_rows = len(x)
     m = int(min(n_rows, n_clusters or max(1, round(4 * np.sqrt(n_rows)))))
     centres = x[np.sort(np.random.default_rng(0).choice(n_rows, m, replace=False))]

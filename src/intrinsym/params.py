@@ -209,8 +209,8 @@ class Params:
     damping: float = _p(0.0, "message damping, in [0, 1)", "bp")
     backend: Backend = _p(
         "auto",
-        "where BP runs: 'auto' is the GPU when CuPy sees a CUDA device, the schedule is "
-        "not 'residual' and dtype is float32, else the CPU",
+        "where BP (and, with it, the global map's nearest-neighbour searches) runs: 'auto' is the GPU "
+        "when CuPy sees a CUDA device, the schedule is not 'residual' and dtype is float32, else the CPU",
         "bp",
     )
     dtype: DType = _p("float32", "storage of messages and marginals", "bp")

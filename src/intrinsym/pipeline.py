@@ -355,6 +355,7 @@ def _solve(
             fit,
             t_spacing,
             p,
+            device=outcome.runs[0].backend,  # the GPU that ran BP runs the dense searches
         )
         clock.lap("global_map")
     sizes = Sizes(

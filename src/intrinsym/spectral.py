@@ -135,7 +135,7 @@ def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarra
     return signs[best], residuals[best]
 
 
-def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray) -> np.ndarray:
+def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, device: str = "cpu") -> np.ndarray:
     """The point map of a functional map: each source row to the nearest target row.
 
     Parameters
@@ -146,20 +146,32 @@ def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray) -> np.
         The same basis at the candidate images.
     C : (k, k) float array
         Functional map in the first k basis functions (``target[T(x), :k] ~ source[x, :k] C``).
+    device : {"cpu", "gpu"}
+        Where the search runs: :func:`intrinsym.neighbours.nearest_rows`, or
+        :func:`intrinsym.neighbours.dense_nearest_rows` with CuPy; the same rows.
 
     Returns
     -------
     (S,) int64
-        Row of ``target`` nearest to ``source[x, :k] C`` for every source row x
-        (:func:`intrinsym.neighbours.nearest_rows`, exact).
+        Row of ``target`` nearest to ``source[x, :k] C`` for every source row x (exact).
     """
     k = len(C)
     query = np.asarray(source, dtype=np.float64)[:, :k] @ C
-    return neighbours.nearest_rows(query, np.asarray(target, dtype=np.float64)[:, :k])
+    basis = np.asarray(target, dtype=np.float64)[:, :k]
+    if device == "gpu":
+        import cupy
+
+        return neighbours.dense_nearest_rows(query, basis, cupy)
+    return neighbours.nearest_rows(query, basis)
 
 
 def zoomout(
-    source: np.ndarray, target: np.ndarray, images: np.ndarray, k_start: int, involution: bool = False
+    source: np.ndarray,
+    target: np.ndarray,
+    images: np.ndarray,
+    k_start: int,
+    involution: bool = False,
+    device: str = "cpu",
 ) -> tuple[np.ndarray, np.ndarray]:
     """ZoomOut refinement of a point map between two sets of basis rows.
 
@@ -186,6 +198,8 @@ def zoomout(
     involution : bool
         Fit the reversed pairs too (self-maps only: ``source`` and ``target`` rows of
         one basis).
+    device : {"cpu", "gpu"}
+        Where the nearest-row searches run (:func:`nearest_images`).
 
     Returns
     -------
@@ -201,7 +215,7 @@ def zoomout(
         for k in range(k_start, src.shape[1] + 1):
             a, b = src[:, :k], tgt[images, :k]
             C = np.linalg.lstsq(np.vstack([a, b]), np.vstack([b, a]), rcond=None)[0]
-            images = nearest_images(src, tgt, C)
+            images = nearest_images(src, tgt, C, device)
         return images, C
     # source[:, :k] = Q[:, :k] R[:k, :k] for every k, and the leading block of the
     # triangular R^-1 is the inverse of R's: one QR serves all the levels
@@ -209,7 +223,7 @@ def zoomout(
     r_inv = solve_triangular(r, np.eye(len(r)))
     for k in range(k_start, src.shape[1] + 1):
         C = r_inv[:k, :k] @ (q[:, :k].T @ tgt[images, :k])
-        images = nearest_images(src, tgt, C)
+        images = nearest_images(src, tgt, C, device)
     return images, C
 
 
@@ -433,6 +447,7 @@ def seeded_functional_maps(
     target_vertices: np.ndarray | None = None,
     target_evecs: np.ndarray | None = None,
     trim: float = SEED_TRIM,
+    device: str = "cpu",
 ) -> list[np.ndarray]:
     """The functional map of :func:`seeded_symmetry`, before its last point map: one per
     entry of ``involutions`` (the samples and the seed shared).
@@ -449,6 +464,8 @@ def seeded_functional_maps(
     trim : float
         The seed's functional map leaves out the pairs whose residual exceeds ``trim``
         times the median (:func:`seed_map`); 0 keeps every pair.
+    device : {"cpu", "gpu"}
+        Where ZoomOut's nearest-row searches run (:func:`nearest_images`).
 
     Returns
     -------
@@ -481,8 +498,8 @@ def seeded_functional_maps(
     C = seed_map(phi[source, :k_seed], psi[target, :k_seed], trim)[0]
     samples = phi[spread[:n_samples]]
     targets = psi[target_spread]
-    start = nearest_images(samples, targets, C)
-    return [zoomout(samples, targets, start, k_seed, involution)[1] for involution in involutions]
+    start = nearest_images(samples, targets, C, device)
+    return [zoomout(samples, targets, start, k_seed, involution, device)[1] for involution in involutions]
 
 
 def seeded_symmetry(
@@ -563,10 +580,12 @@ def map_points(
     points: np.ndarray | None = None,
     candidates: np.ndarray | None = None,
     target_evecs: np.ndarray | None = None,
+    device: str = "cpu",
 ) -> np.ndarray:
     """The point map of a functional map ``C`` (k, k) in the eigenfunctions 1..k
-    (:func:`nearest_images`), from ``points`` (default: all vertices) onto ``candidates``
-    (default: all vertices of the target shape, ``target_evecs`` or the same one).
+    (:func:`nearest_images`, on ``device``), from ``points`` (default: all vertices) onto
+    ``candidates`` (default: all vertices of the target shape, ``target_evecs`` or the
+    same one).
 
     Returns
     -------
@@ -578,4 +597,4 @@ def map_points(
     psi = phi if target_evecs is None else np.asarray(target_evecs, dtype=np.float64)[:, 1 : k + 1]
     points = np.arange(len(phi)) if points is None else np.asarray(points, dtype=np.int64)
     candidates = np.arange(len(psi)) if candidates is None else np.asarray(candidates, dtype=np.int64)
-    return candidates[nearest_images(phi[points], psi[candidates], C)]
+    return candidates[nearest_images(phi[points], psi[candidates], C, device)]
