@@ -175,6 +175,36 @@ def test_seeded_symmetry_refines_sparse_noisy_pairs(mirror):
         spectral.seeded_symmetry(v, evecs, source[:5], target[:5], k_seed=6)
 
 
+def test_the_device_searches_give_the_cpu_maps(mirror, monkeypatch):
+    """``device="gpu"`` runs the dense search (CuPy stood in for by NumPy here): ZoomOut's
+    functional maps and the point maps are those of the CPU search, exactly."""
+    import sys
+
+    from intrinsym import laplacian, neighbours
+
+    monkeypatch.setitem(sys.modules, "cupy", np)
+    dense, searched = neighbours.dense_nearest_rows, []
+    monkeypatch.setattr(neighbours, "dense_nearest_rows", lambda q, x, xp: searched.append(len(q)) or dense(q, x, xp))
+    v, f, sym = mirror
+    _, evecs = laplacian.eigenpairs(v, f, 31)
+    source = np.arange(0, len(v), 40)
+    fits = {
+        device: spectral.seeded_functional_maps(
+            v, evecs, source, sym[source], 6, 30, involutions=(True, False), device=device
+        )
+        for device in ("cpu", "gpu")
+    }
+    # the start and every ZoomOut level of both fits (k = 6..30) searched densely, the CPU run none
+    assert len(searched) == 1 + 2 * 25
+    for cpu, gpu in zip(fits["cpu"], fits["gpu"]):
+        np.testing.assert_array_equal(cpu, gpu)
+    points = np.arange(0, len(v), 3)
+    images = [spectral.map_points(fits["cpu"][0], evecs, points, device=device) for device in ("cpu", "gpu")]
+    np.testing.assert_array_equal(images[0], images[1])
+    assert searched[-1] == len(points)
+    assert best_score(spectral.map_points(fits["cpu"][0], evecs), v, f, [sym]).within(0.05) > 0.99
+
+
 def test_seeded_symmetry_keeps_the_seeded_one_of_several_symmetries():
     """On an ellipsoid with seven symmetries, the pairs pick which one comes out."""
     from intrinsym import laplacian
