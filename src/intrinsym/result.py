@@ -24,7 +24,7 @@ from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, save_npz, write_set
 from .params import Params
-from .runinfo import RunInfo
+from .runinfo import RunInfo, stored_params
 from .support import Support
 from .vertex_maps import fitted_vertex_map
 
@@ -294,10 +294,7 @@ class Result:
                 zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
             name = out / "run.json"
             run = json.loads(name.read_text())
-            stored = run.pop("params")
-            if run.get("format_version", 1) < 3:
-                stored.pop("involution_threshold", None)  # replaced by reflection_threshold
-            params = Params(**stored)
+            params = Params(**stored_params(run))
             info = RunInfo.from_dict(run)
         except _UNREADABLE as err:
             reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"

@@ -19,6 +19,19 @@ import numpy as np
 #: Version of the result folder's format (``run.json``'s ``format_version``).
 FORMAT_VERSION = 3
 
+#: What format 3 replaced by the reflection test: the round trip alone (``identity``'s
+#: statistic and threshold, and the parameter), dropped when an older file is read.
+_ROUND_TRIP_KEYS = ("involution", "involution_threshold")
+
+
+def stored_params(run: dict[str, Any]) -> dict[str, Any]:
+    """``run.json``'s ``params`` in the current format's names (for ``Params(**...)``)."""
+    params = dict(run["params"])
+    if run.get("format_version", 1) < 3:
+        for key in _ROUND_TRIP_KEYS:
+            params.pop(key, None)
+    return params
+
 
 @dataclass(frozen=True)
 class Sizes:
@@ -252,7 +265,7 @@ class RunInfo:
         bp["passes"] = tuple(PassStats(**q) for q in bp.get("passes", ()))
         identity = run.get("identity")
         if identity and version < 3:
-            identity = {k: v for k, v in identity.items() if k not in ("involution", "involution_threshold")}
+            identity = {k: v for k, v in identity.items() if k not in _ROUND_TRIP_KEYS}
         zoomout = run.get("zoomout")
         global_map = run.get("global_map")
         return cls(
