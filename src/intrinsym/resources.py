@@ -19,6 +19,10 @@ from .errors import ResourceError, path_label
 if TYPE_CHECKING:
     from .params import Params
 
+#: BP iterations per pass the time estimate assumes (7-20 on 34 of the 36 benchmark
+#: shapes, docs/results.md).
+TYPICAL_ITERATIONS = 15
+
 
 def available_memory() -> int | None:
     """Bytes of memory this process can still use, or None if unknown.
@@ -216,14 +220,18 @@ def _count(n: int | None, spacing: float | None) -> int:
 def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimate:
     """Approximate peak memory and time of a run of ``p`` on a mesh of ``n_vertices``.
 
-    A model of the measured stages (TOSCA runs at |Ps| = 250, |Pt| = 4000 and the
-    scaling of each stage): the working shape, subdivided to 3 max(|Ps|, |Pt|) vertices
-    when coarser, costs about 0.3 ms and 2 kB per vertex (cleaning, geodesic graph,
-    eigenpairs, ZoomOut); the descriptors 10 us and 8 bytes per source-target pair and
-    unary term; BP holds 6 (plus 2 per further pass) float32 |Ps| x |Pt| arrays and 2
-    messages of |Pt| per source edge (about 3 |Ps| edges), plus the target rings
-    (about 23 |Pt| / |Ps| neighbours per target), and one iteration costs about
-    0.16 us |Pt|^2, for at most 30 iterations per pass. Within a factor of about 2.
+    A model of the measured stages (TOSCA cat1 and michael1 at |Ps| = 250, |Pt| = 4000
+    and at the paper's elephant size, 271 / 12722, on the 2-core development machine;
+    docs/benchmarks.md): the interpreter and libraries take 150 MB and 2 s; the working
+    shape (a mesh of fewer than 3 max(|Ps|, |Pt|) vertices subdivided, each round four
+    times as many) 11 kB and 0.16 ms per vertex (cleaning, geodesic graph, eigenpairs,
+    the global map); the target
+    distances 0.5 ms per target; the descriptors 0.8 us and 8 bytes per source-target
+    pair and unary term. BP holds 6 (plus 2 per further pass) float32 |Ps| x |Pt|
+    arrays and 2 messages of |Pt| per source edge (about 3 |Ps| edges), plus the
+    target rings (about 23 |Pt| / |Ps| neighbours per target); one iteration visits
+    each edge's ring rows, about 0.07 us sqrt(|Ps|) |Pt|^1.5, for ``TYPICAL_ITERATIONS``
+    per pass. Within a factor of about 2.
 
     Parameters
     ----------
@@ -240,13 +248,17 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     s = _count(p.n_source, p.source_spacing)
     t = _count(p.n_target, p.target_spacing)
     passes = p.passes if p.passes is not None else 1 if self_match else 2
-    work = max(n_vertices, 3 * max(s, t))
+    work = max(n_vertices, 1)
+    while work < 3 * max(s, t):  # each midpoint subdivision round quadruples a mesh
+        work *= 4
     terms = len(p.unary_terms) * (1 if self_match else 2)
     itemsize = np.dtype(p.dtype).itemsize
     model = (6 + 2 * (passes - 1)) * s * t * 4 + 2 * 3 * s * t * itemsize + 272 * t * t // s
     unary = (terms + 1) * s * t * 8 + t * p.spin_bins**2 * 3 + 48 * p.spin_cloud
-    nbytes = int(2000 * work + model + unary)
-    seconds = 3e-4 * work + 1e-5 * s * t * terms + passes * min(p.iterations, 30) * 1.6e-7 * t * t
+    nbytes = int(150e6 + 11000 * work + model + unary)
+    iteration = 7e-8 * np.sqrt(s) * t**1.5
+    bp = passes * min(p.iterations, TYPICAL_ITERATIONS) * iteration
+    seconds = 2.0 + 1.6e-4 * work + 5e-4 * t + 8e-7 * s * t * terms + bp
     return Estimate(nbytes, float(seconds), s, t)
 
 
