@@ -72,7 +72,9 @@ def measure(case, saved: Path, settings: list[tuple[int, float]], exact: bool = 
         marginals = np.eye(len(ps), dtype=np.float32)
     for k, tol in settings:
         params = dataclasses.replace(p, refine_anchors=k)
-        refined = refined_map(surf, ps, targets, result.source_point_vertex, marginals, start, spacing, params, tol)
+        refined = refined_map(
+            surf, ps, targets, result.source_point_vertex, marginals, start, result.edges, spacing, params, tol
+        )
         row[(k, tol)] = _scores(refined, mesh, truth)
         row.setdefault("moved", float(np.mean(refined != start)))
     return row

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 import intrinsym
 from intrinsym import evaluate, geodesics
 from intrinsym.globalmap import refined_map
-from intrinsym.refine import _nearest_sources, agreeing_anchors, spectral_descent, trilaterate
+from intrinsym.refine import _nearest_sources, agreeing_anchors, consistent_anchors, spectral_descent, trilaterate
 from intrinsym.shape import from_arrays
 from intrinsym.surface import prepare, sample
 
@@ -68,6 +68,58 @@ def test_anchors_agree_within_the_tolerance(mirror):
     assert not ok[:5].any() and ok[5:].all()
 
 
+def _group(surf, ps: np.ndarray, radius: float) -> np.ndarray:
+    """The sample farthest from the mirror plane and every sample within ``radius`` of it."""
+    first = np.argmax(surf.shape.vertices[ps, 0])
+    return np.flatnonzero(geodesics.distances_from(surf.graph, ps[[first]])[0, ps] <= radius)
+
+
+def _orientation(surf, ps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return geodesics.voronoi_adjacency(surf.graph, ps), surf.shape.vertices, surf.normals
+
+
+def test_the_anchors_of_a_part_the_map_flipped_are_kept(mirror):
+    """The map keeps a part in place (the identity: it does not turn the part around,
+    as the mirror turns the rest); there the true anchors disagree with it, turn the
+    part around and keep the distances, so they are kept."""
+    surf, sym, ps = _surface(mirror)
+    group = _group(surf, ps, 0.2)
+    assert len(group) >= 3
+    images = sym[ps].copy()
+    images[group] = ps[group]
+    assert not agreeing_anchors(surf.graph, sym[ps], images, 0.1)[group].any()
+    keep = consistent_anchors(surf.graph, ps, sym[ps], images, 0.1, 20, 0.4, _orientation(surf, ps))
+    assert keep.all()
+
+
+def test_a_disagreeing_anchor_is_not_trusted_where_the_map_turns_the_right_way(mirror):
+    """The map slides a part 0.15 along the mirror (still turning it around): the true
+    anchors there are not used, as a marginal pushed off the midline would not be."""
+    surf, sym, ps = _surface(mirror)
+    group = _group(surf, ps, 0.2)
+    images = sym[ps].copy()
+    images[group] = _slid(surf, sym, 0.15)[ps[group]]
+    agree = agreeing_anchors(surf.graph, sym[ps], images, 0.1)
+    assert np.count_nonzero(~agree[group]) >= 3
+    keep = consistent_anchors(surf.graph, ps, sym[ps], images, 0.1, 20, 0.4, _orientation(surf, ps))
+    np.testing.assert_array_equal(keep, agree)
+
+
+def test_anchors_that_do_not_keep_the_distances_are_dropped(mirror):
+    """The map keeps a part in place and the anchors there turn it around but lie half the
+    shape away (another part's images): they keep the distances worse and are dropped."""
+    surf, sym, ps = _surface(mirror)
+    group = _group(surf, ps, 0.2)
+    images = sym[ps].copy()
+    images[group] = ps[group]
+    anchors = sym[ps].copy()
+    anchors[group] = _slid(surf, sym, -0.6)[ps[group]]
+    agree = agreeing_anchors(surf.graph, anchors, images, 0.1)
+    assert np.count_nonzero(~agree[group]) >= 3
+    keep = consistent_anchors(surf.graph, ps, anchors, images, 0.1, 20, 0.4, _orientation(surf, ps))
+    np.testing.assert_array_equal(keep, agree)
+
+
 def test_refined_map_ignores_marginals_that_disagree_with_the_map(mirror):
     """Marginals peaked at the true image of every sample but ten, whose peaks are far
     off: the exact map stays, and a slid one is pulled back by the agreeing samples."""
@@ -80,9 +132,10 @@ def test_refined_map_ignores_marginals_that_disagree_with_the_map(mirror):
     marginals[np.arange(10), far] = 1.0
     p = intrinsym.Params(refine_anchors=8)  # 80 samples: about 20 within reach, 10 of them dropped
     spacing = 0.005  # the tolerance, 2 spacings, is below the slide's error
-    np.testing.assert_array_equal(refined_map(surf, ps, pt, ps, marginals, sym, spacing, p), sym)
+    edges = geodesics.voronoi_adjacency(surf.graph, ps)
+    np.testing.assert_array_equal(refined_map(surf, ps, pt, ps, marginals, sym, edges, spacing, p), sym)
     start = _slid(surf, sym, 0.04)
-    refined = refined_map(surf, ps, pt, ps, marginals, start, spacing, p)
+    refined = refined_map(surf, ps, pt, ps, marginals, start, edges, spacing, p)
     assert _errors(surf, refined, sym).mean() < _errors(surf, start, sym).mean() / 3
 
 

@@ -37,7 +37,7 @@ from . import spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
 from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, SMOOTH_POINTS, Params
-from .refine import agreeing_anchors, spectral_descent, trilaterate
+from .refine import consistent_anchors, spectral_descent, trilaterate
 from .support import Support
 from .surface import Surface
 from .vertex_maps import fitted_vertex_map
@@ -272,7 +272,7 @@ def choose_global_map(
     vertex_map = np.asarray(maps[best], dtype=np.int64)
     refined = vertex_map
     if p.refine_anchors > 0:
-        refined = refined_map(surface, ps, pt, source_vertex, marginals, vertex_map, spacing, p)
+        refined = refined_map(surface, ps, pt, source_vertex, marginals, vertex_map, fit[0], spacing, p)
     final, mass = refined, mass_of(refined)
     if p.smooth_map and spectrum is not None:
         smoothed = smoothed_map(surface, refined, spectrum[1])
@@ -320,6 +320,7 @@ def refined_map(
     source_vertex: np.ndarray,
     marginals: np.ndarray,
     vertex_map: np.ndarray,
+    edges: np.ndarray,
     spacing: float,
     p: Params,
     tolerance: float = REFINE_TOLERANCE,
@@ -327,9 +328,12 @@ def refined_map(
     """The global map refined by geodesic trilateration (:func:`intrinsym.refine.trilaterate`).
 
     Anchors: each source sample's marginal argmax target, where it lies within
-    ``p.mass_radius`` of the map's image of the sample; each vertex is trilaterated
-    against its ``p.refine_anchors`` nearest anchored samples, and keeps its image where
-    that keeps the distances to within ``tolerance`` target spacings.
+    ``p.mass_radius`` of the map's image of the sample, or where the map turns the
+    sample the wrong way round and the argmax keeps the geodesic distances to those
+    anchors better (:func:`intrinsym.refine.consistent_anchors`: a part the map
+    flipped); each vertex is trilaterated against its ``p.refine_anchors`` nearest
+    anchored samples, and keeps its image where that keeps the distances to within
+    ``tolerance`` target spacings.
 
     Parameters
     ----------
@@ -341,6 +345,8 @@ def refined_map(
     marginals : (S, T) float array
     vertex_map : (N_in,) int64
         Image input vertex of every input vertex.
+    edges : (E, 2) int64
+        Source-graph edges (rows of ``ps``).
     spacing : float
         Target spacing (sqrt(area) units).
     p : Params
@@ -354,12 +360,22 @@ def refined_map(
     work = surface.vertex_map
     start = work[vertex_map]
     anchors = np.asarray(pt, dtype=np.int64)[np.asarray(marginals).argmax(axis=1)]
-    keep = agreeing_anchors(surface.graph, anchors, start[source_vertex], p.mass_radius)
+    samples = np.asarray(ps, dtype=np.int64)
+    keep = consistent_anchors(
+        surface.graph,
+        samples,
+        anchors,
+        start[source_vertex],
+        p.mass_radius,
+        p.refine_anchors,
+        REFINE_REACH,
+        (edges, surface.shape.vertices, surface.normals),
+    )
     image = trilaterate(
         surface.graph,
         work,
         start,
-        np.asarray(ps, dtype=np.int64)[keep],
+        samples[keep],
         anchors[keep],
         p.refine_anchors,
         tolerance * spacing,
