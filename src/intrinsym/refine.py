@@ -166,6 +166,8 @@ def consistent_anchors(
     (S,) bool
     """
     keep = agreeing_anchors(graph, anchors, images, agree)
+    if keep.all() or not keep.any():
+        return keep
     samples = np.asarray(samples, dtype=np.int64)
     anchors = np.asarray(anchors, dtype=np.int64)
     images = np.asarray(images, dtype=np.int64)
@@ -175,7 +177,7 @@ def consistent_anchors(
     )
     usual = 2 * np.count_nonzero(by_map) >= len(by_map)
     doubt = np.flatnonzero(~keep & (by_map != usual) & (by_anchor == usual))
-    if len(doubt) == 0 or not keep.any():
+    if len(doubt) == 0:
         return keep
     good = np.flatnonzero(keep)
     horizon = reach + 2.0 * agree
