@@ -53,6 +53,10 @@ REFINE_REACH = 0.3
 #: vertices per eigenfunction; a coarser input keeps its map
 #: (:func:`intrinsym.globalmap.smoothed_map`).
 SMOOTH_POINTS = 4
+#: A mesh with fewer vertices than this many times the larger sample count is
+#: midpoint-subdivided (each round quadruples it) until it has that many: the working
+#: shape the samples, geodesics and descriptors live on (measured in docs/benchmarks.md).
+WORK_PER_SAMPLE = 2
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
 #: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.

@@ -23,7 +23,7 @@ from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
 from .extract import Extraction, consistency, extract_from_support
 from .globalmap import choose_global_map
-from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, RETURN_RADIUS, Params, make_params
+from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, RETURN_RADIUS, WORK_PER_SAMPLE, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
 from .reflection import reflection
 from .result import Result
@@ -425,7 +425,7 @@ def check_machine(p: Params) -> None:
 
 
 def _min_vertices(p: Params) -> int:
-    return 3 * max(p.n_source or 0, p.n_target or 0)
+    return WORK_PER_SAMPLE * max(p.n_source or 0, p.n_target or 0)
 
 
 def sample_pair(src: Surface, tgt: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:

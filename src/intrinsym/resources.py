@@ -15,13 +15,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import ResourceError, path_label
+from .params import WORK_PER_SAMPLE
 
 if TYPE_CHECKING:
     from .params import Params
 
-#: BP iterations per pass the time estimate assumes (7-20 on 34 of the 36 benchmark
-#: shapes, docs/results.md).
-TYPICAL_ITERATIONS = 15
+#: BP iterations per pass the time estimate assumes: the median over the 36 shapes of
+#: docs/results.md's benchmark (7-20 on 34 of them, 41 and 72 on the others).
+TYPICAL_ITERATIONS = 11
 
 
 def available_memory() -> int | None:
@@ -223,15 +224,16 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     A model of the measured stages (TOSCA cat1 and michael1 at |Ps| = 250, |Pt| = 4000
     and at the paper's elephant size, 271 / 12722, on the 2-core development machine;
     docs/benchmarks.md): the interpreter and libraries take 150 MB and 2 s; the working
-    shape (a mesh of fewer than 3 max(|Ps|, |Pt|) vertices subdivided, each round four
-    times as many) 11 kB and 0.16 ms per vertex (cleaning, geodesic graph, eigenpairs,
-    the global map); the target
-    distances 0.5 ms per target; the descriptors 0.8 us and 8 bytes per source-target
-    pair and unary term. BP holds 6 (plus 2 per further pass) float32 |Ps| x |Pt|
-    arrays and 2 messages of |Pt| per source edge (about 3 |Ps| edges), plus the
-    target rings (about 23 |Pt| / |Ps| neighbours per target); one iteration visits
-    each edge's ring rows, about 0.07 us sqrt(|Ps|) |Pt|^1.5, for ``TYPICAL_ITERATIONS``
-    per pass. Within a factor of about 2.
+    shape (a mesh of fewer than ``WORK_PER_SAMPLE`` max(|Ps|, |Pt|) vertices subdivided,
+    each round four times as many) 11 kB and 0.16 ms per vertex (cleaning, geodesic
+    graph, eigenpairs, the global map); the target distances 10 ns per vertex and
+    target; the descriptors 0.8 us and 8 bytes per source-target pair and unary term.
+    BP holds 6 (plus 2 per further pass) float32 |Ps| x |Pt| arrays and 2 messages of
+    |Pt| per source edge (about 3 |Ps| edges), plus the target rings (about 23 |Pt| /
+    |Ps| neighbours per target); one iteration visits each edge's ring rows, about
+    0.07 us sqrt(|Ps|) |Pt|^1.5, for ``TYPICAL_ITERATIONS`` per pass. Within 40 % of
+    the measured time and 20 % of the memory on the runs of docs/benchmarks.md; a run
+    that needs many more BP iterations than the median takes longer.
 
     Parameters
     ----------
@@ -249,7 +251,7 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     t = _count(p.n_target, p.target_spacing)
     passes = p.passes if p.passes is not None else 1 if self_match else 2
     work = max(n_vertices, 1)
-    while work < 3 * max(s, t):  # each midpoint subdivision round quadruples a mesh
+    while work < WORK_PER_SAMPLE * max(s, t):  # each midpoint subdivision round quadruples a mesh
         work *= 4
     terms = len(p.unary_terms) * (1 if self_match else 2)
     itemsize = np.dtype(p.dtype).itemsize
@@ -258,7 +260,7 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     nbytes = int(150e6 + 11000 * work + model + unary)
     iteration = 7e-8 * np.sqrt(s) * t**1.5
     bp = passes * min(p.iterations, TYPICAL_ITERATIONS) * iteration
-    seconds = 2.0 + 1.6e-4 * work + 5e-4 * t + 8e-7 * s * t * terms + bp
+    seconds = 2.0 + 1.6e-4 * work + 1e-8 * work * t + 8e-7 * s * t * terms + bp
     return Estimate(nbytes, float(seconds), s, t)
 
 
