@@ -92,17 +92,40 @@ def test_the_anchors_of_a_part_the_map_flipped_are_kept(mirror):
     assert keep.all()
 
 
-def test_a_disagreeing_anchor_is_not_trusted_where_the_map_turns_the_right_way(mirror):
-    """The map slides a part 0.15 along the mirror (still turning it around): the true
-    anchors there are not used, as a marginal pushed off the midline would not be."""
+def test_a_disagreeing_anchor_where_the_map_turns_the_right_way_is_trusted_beyond_the_trivial_radius(mirror):
+    """The map slides a part 0.15 along the mirror (still turning it around). Without a
+    trivial radius the true anchors there are not used, as a marginal pushed off the
+    midline would not be; with 0.08 they are (the part lies far from the mirror plane, so
+    its images lie far beyond the radius from it, and the anchors keep the distances)."""
     surf, sym, ps = _surface(mirror)
     group = _group(surf, ps, 0.2)
     images = sym[ps].copy()
     images[group] = _slid(surf, sym, 0.15)[ps[group]]
     agree = agreeing_anchors(surf.graph, sym[ps], images, 0.1)
     assert np.count_nonzero(~agree[group]) >= 3
-    keep = consistent_anchors(surf.graph, ps, sym[ps], images, 0.1, 20, 0.4, _orientation(surf, ps))
+    orientation = _orientation(surf, ps)
+    keep = consistent_anchors(surf.graph, ps, sym[ps], images, 0.1, 20, 0.4, orientation)
     np.testing.assert_array_equal(keep, agree)
+    assert consistent_anchors(surf.graph, ps, sym[ps], images, 0.1, 20, 0.4, orientation, 0.08).all()
+
+
+def test_a_disagreeing_anchor_is_not_trusted_where_the_map_keeps_a_part_within_the_trivial_radius(mirror):
+    """Samples on the mirror plane slid 0.045-0.075 along it: their images stay within
+    the trivial radius 0.08 of them (the midline, where a marginal is pushed off the true
+    image), so their true anchors are not used; with a radius of 0.04 they are."""
+    surf, sym, ps = _surface(mirror)
+    near = np.flatnonzero(np.abs(surf.shape.vertices[ps, 0]) < 0.05)
+    slid = _slid(surf, sym, 0.06)[ps[near]]
+    moved = geodesics.pair_distances(surf.graph, np.column_stack([ps[near], slid]))
+    between = (moved > 0.045) & (moved < 0.075)  # the bend stretches some slides
+    images = sym[ps].copy()
+    images[near[between]] = slid[between]
+    agree = agreeing_anchors(surf.graph, sym[ps], images, 0.03)
+    assert np.count_nonzero(~agree) >= 3
+    orientation = _orientation(surf, ps)
+    keep = consistent_anchors(surf.graph, ps, sym[ps], images, 0.03, 20, 0.4, orientation, 0.08)
+    np.testing.assert_array_equal(keep, agree)
+    assert consistent_anchors(surf.graph, ps, sym[ps], images, 0.03, 20, 0.4, orientation, 0.04).all()
 
 
 def test_anchors_that_do_not_keep_the_distances_are_dropped(mirror):

@@ -370,6 +370,7 @@ def refined_map(
         p.refine_anchors,
         REFINE_REACH,
         (edges, surface.shape.vertices, surface.normals),
+        p.trivial_radius if p.remove_trivial else np.inf,
     )
     image = trilaterate(
         surface.graph,

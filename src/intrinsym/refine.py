@@ -122,26 +122,29 @@ def consistent_anchors(
     k: int,
     reach: float,
     orientation: tuple[np.ndarray, np.ndarray, np.ndarray],
+    trivial: float = np.inf,
 ) -> np.ndarray:
-    """:func:`agreeing_anchors`, plus the disagreeing anchors of the samples where the map
-    turned a part the wrong way round and the anchor keeps the geodesic distances.
+    """:func:`agreeing_anchors`, plus the disagreeing anchors that keep the geodesic
+    distances better, where the marginals can be trusted over the map.
 
     For a sample s whose anchor a lies farther than ``agree`` from the map's image m, a
     is kept when
 
-    - the map does not turn s the way it turns most samples (a reflection reverses the
-      order of a sample's neighbours, :func:`intrinsym.reflection.reversed_turns`; a
-      rotation keeps it) and a does: the map flipped the part s lies on (a densely
-      meshed head turned about the wrong axis);
+    - a turns s the way the map turns most samples (a reflection reverses the order of
+      a sample's neighbours, :func:`intrinsym.reflection.reversed_turns`; a rotation
+      keeps it), and either the map does not (it flipped the part s lies on: a densely
+      meshed head turned about the wrong axis) or m lies farther than ``trivial`` from
+      s (the map moved s to the wrong place on a part it turned the right way);
     - with s_i its (at most ``k``) nearest samples within ``reach`` whose anchors a_i
       agree, ``rms_i (d(a, a_i) - d(s, s_i)) < rms_i (d(m, a_i) - d(s, s_i))``, image
       distances beyond ``reach + 2 agree`` counting as that far: the argmax of a sample
       whose marginal holds another symmetry (another limb) keeps them far worse.
 
-    Where the map turns a sample the right way, a disagreeing marginal is not trusted:
-    on the midline of a reflection the true image lies within the trivial radius the
-    model removed, so the marginal's argmax is pushed off it (TOSCA centaur3's head: 85 %
-    of the mass 0.12 from the true image), and keeps the distances as well.
+    Where the map turns a sample the right way and keeps it within ``trivial`` of
+    itself, a disagreeing marginal is not trusted: on the midline of a reflection the
+    true image lies within the trivial radius the model removed, so the marginal's
+    argmax is pushed off it (TOSCA centaur3's head: 85 % of the mass 0.12 from the true
+    image), and keeps the distances as well.
 
     Parameters
     ----------
@@ -160,6 +163,9 @@ def consistent_anchors(
     orientation : ((E, 2) int, (N, 3) float, (N, 3) float)
         Source-graph edges (rows of ``samples``), and the working shape's vertex
         positions and outward unit normals.
+    trivial : float
+        The radius of the trivial match the model weakened (graph length units); ``inf``
+        (the default): only the samples the map turned the wrong way round.
 
     Returns
     -------
@@ -176,7 +182,13 @@ def consistent_anchors(
         reversed_turns(image, edges, points[samples], points, normals[samples], normals) for image in (images, anchors)
     )
     usual = 2 * np.count_nonzero(by_map) >= len(by_map)
-    doubt = np.flatnonzero(~keep & (by_map != usual) & (by_anchor == usual))
+    doubt = ~keep & (by_anchor == usual)
+    map_wrong = by_map != usual
+    unturned = np.flatnonzero(doubt & ~map_wrong)
+    if np.isfinite(trivial) and len(unturned):
+        pairs = np.column_stack([samples[unturned], images[unturned]])
+        map_wrong[unturned] = ~np.isfinite(pair_distances(graph, pairs, trivial))
+    doubt = np.flatnonzero(doubt & map_wrong)
     if len(doubt) == 0:
         return keep
     good = np.flatnonzero(keep)

@@ -375,7 +375,7 @@ def symmetry_candidates(
     targets = phi[spread]
     samples = targets[:n_samples]
     signs, _ = sign_candidates(samples[:, chosen], n_candidates)
-    commute = targets / np.sqrt(lam)
+    commute = targets * np.divide(1.0, np.sqrt(lam), out=np.zeros_like(lam), where=lam > 0)  # 0 per extra part
     tree = cKDTree(targets[:, chosen])
     maps, distortions = [], []
     for s in signs:
