@@ -79,11 +79,13 @@ def _fast_table(lines: list[str], dtype: type) -> np.ndarray | None:
     Returns an (n, c) array, or None when the lines are not such a table (the
     caller then parses line by line to report the exact problem).
     """
+    if not all(line.strip() for line in lines):
+        return None  # loadtxt skips blank lines (and warns when all are)
     try:
         table: np.ndarray = np.loadtxt(lines, dtype=dtype, comments=None, ndmin=2)
     except ValueError:
         return None
-    return table if len(table) == len(lines) else None  # loadtxt skips blank lines
+    return table
 
 
 def _parse_points(numbers: list[int], lines: list[str], label: str, what: str) -> np.ndarray:
