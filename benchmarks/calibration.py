@@ -4,13 +4,16 @@ Reads the per-shape rows that ``benchmarks/tosca.py`` caches (``--cache DIR``): 
 with a global map holds histograms of the symmetry map's per-vertex score
 (``symmetry_score``: the marginal mass weighed by how far two global maps agree) and of
 its marginal mass alone (``symmetry_mass``), :data:`tosca.MASS_BINS` equal-width bins,
-with, per bin, how many vertices map within 0.05 of their true image. From the
-``--feature`` chosen (default ``score``, what the package calibrates) it
+with, per bin, how many vertices map within 0.05 of their true image; ``score_split``
+holds the score's bins twice, for the vertices with the trilateration's anchors around
+them (``symmetry_supported``) and for the others. From the ``--feature`` chosen (default
+``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
-   0.05" on the bin centres, weighted by the vertex counts; these values are
-   :data:`intrinsym.confidence.CALIBRATION` (the script says whether the package's copy
-   is the fit, and prints the fit to paste when it is not);
+   0.05" on the bin centres, weighted by the vertex counts, one per group of bins; these
+   values are :data:`intrinsym.confidence.CALIBRATION` and ``CALIBRATION_SPARSE`` (the
+   script says whether the package's copy is the fit, and prints the fit to paste when it
+   is not);
 2. checks it leaving one class out: for each class, the fit on the other classes is
    applied to that class's vertices; the table gives the expected calibration error (10
    equal-width confidence bins) of the raw mass and of the calibrated confidence, and the
@@ -20,7 +23,7 @@ with, per bin, how many vertices map within 0.05 of their true image. From the
 Every vertex of a mass bin takes the confidence of the bin's centre (the histogram holds
 no finer mass). Command::
 
-    python benchmarks/calibration.py --cache DIR [--tag TAG] [--feature score|mass] [-o TABLE.md]
+    python benchmarks/calibration.py --cache DIR [--tag TAG] [--feature score_split|score|mass] [-o TABLE.md]
 """
 
 from __future__ import annotations
@@ -62,13 +65,27 @@ def centres(n_bins: int) -> np.ndarray:
     return (np.arange(n_bins) + 0.5) / n_bins
 
 
-def fit(rows: list[dict]) -> np.ndarray:
-    """Isotonic fit of the share within 0.05 per mass bin (empty bins take their neighbours')."""
-    count, within = histogram(rows)
+def bin_centres(rows: list[dict]) -> np.ndarray:
+    """The score at the centre of every bin of the rows' histograms (each group's bins in turn)."""
+    histogram = rows[0]["reliability"]
+    bins = histogram.get("bins", len(histogram["count"]))
+    return np.tile(centres(bins), len(histogram["count"]) // bins)
+
+
+def _isotonic(count: np.ndarray, within: np.ndarray) -> np.ndarray:
     has = count > 0
     values = np.empty(len(count))
     values[has] = isotonic_regression(within[has] / count[has], weights=count[has]).x
     return np.interp(centres(len(count)), centres(len(count))[has], values[has])
+
+
+def fit(rows: list[dict]) -> np.ndarray:
+    """Isotonic fit of the share within 0.05 per mass bin (empty bins take their
+    neighbours'), one fit per group of bins (``score_split``: the supported vertices',
+    then the others')."""
+    count, within = histogram(rows)
+    bins = rows[0]["reliability"].get("bins", len(count))
+    return np.concatenate([_isotonic(count[g : g + bins], within[g : g + bins]) for g in range(0, len(count), bins)])
 
 
 def ece(conf: np.ndarray, count: np.ndarray, within: np.ndarray) -> float:
@@ -93,7 +110,7 @@ def leave_one_class_out(rows: list[dict]) -> tuple[list[dict], np.ndarray, np.nd
         train = [r for r in rows if r["class"] != cls]
         calib = fit(train)
         count, within = histogram(test)
-        mass = centres(len(count))
+        mass = bin_centres(test)
         shapes = []
         for r in test:
             c = np.asarray(r["reliability"]["count"], dtype=np.float64)
@@ -126,7 +143,7 @@ def markdown(rows: list[dict]) -> str:
             f"| {c['class']} | {c['shapes']} | {c['ece_mass']:.3f} | {c['ece_calibrated']:.3f} | "
             f"{worst[1] - worst[2]:+.3f} ({worst[0]}: {worst[1]:.3f} vs {worst[2]:.3f}) |"
         )
-    mass = np.tile(centres(len(rows[0]["reliability"]["count"])), len(per_class))
+    mass = np.tile(bin_centres(rows), len(per_class))
     lines.append(
         f"| **all, held out** | {len(rows)} | {ece(mass, count, within):.3f} | {ece(conf, count, within):.3f} | "
         f"mean abs {np.mean([abs(s[1] - s[2]) for c in per_class for s in c['global']]):.3f} |"
@@ -148,7 +165,13 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cache", type=Path, required=True, help="benchmarks/tosca.py's cache folder")
     parser.add_argument("--tag", help="only rows with this tag")
-    parser.add_argument("--feature", choices=("score", "mass"), default="score", help="what is calibrated")
+    parser.add_argument(
+        "--feature",
+        choices=("score_split", "score", "mass"),
+        default="score_split",
+        help="what is calibrated (score_split: the score, one table for the vertices with the trilateration's "
+        "anchors around them and one for the others)",
+    )
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
     args = parser.parse_args(argv)
     rows = load_rows(args.cache, args.tag, args.feature)
@@ -157,11 +180,12 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     text = markdown(rows)
     values = fit(rows)
-    same = np.allclose(values, confidence.CALIBRATION, atol=5e-4)
-    text += (
-        f"\nFit on all {len(rows)} shapes ({'equal to' if same else 'differs from'} "
-        f"intrinsym.confidence.CALIBRATION):\n\nCALIBRATION = ({', '.join(f'{v:.3f}' for v in values)})\n"
-    )
+    names = ("CALIBRATION", "CALIBRATION_SPARSE")[: len(values) // len(confidence.CALIBRATION)]
+    shipped = np.concatenate([getattr(confidence, name) for name in names])
+    same = np.allclose(values, shipped, atol=5e-4)
+    tables = np.split(values, len(names))
+    text += f"\nFit on all {len(rows)} shapes ({'equal to' if same else 'differs from'} intrinsym.confidence's):\n\n"
+    text += "".join(f"{name} = ({', '.join(f'{v:.3f}' for v in t)})\n" for name, t in zip(names, tables, strict=True))
     print(text)
     if args.out:
         args.out.write_text(text)

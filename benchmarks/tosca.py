@@ -208,13 +208,19 @@ def reliability(result, shape, sym) -> dict | None:
     """Per bin of the symmetry map's per-vertex score (``symmetry_score``, the uncalibrated
     confidence) and of its marginal mass (``symmetry_mass``): how many vertices fall in it
     and how many of them map within 0.05 / 0.10 of the true image (graph geodesics, units
-    of sqrt(area)); keyed ``score`` and ``mass``, each None on code without it."""
+    of sqrt(area)); keyed ``score`` and ``mass``, each None on code without it. Keyed
+    ``score_split``: the score's bins of the vertices with the trilateration's anchors
+    around them (``symmetry_supported``), then those of the others (``groups`` 2)."""
     features = {}
     for key in ("score", "mass"):
         of = getattr(result, f"symmetry_{key}", None)
         features[key] = None if of is None else np.asarray(of(), dtype=np.float64)
     if features["mass"] is None:
         return None
+    supported = getattr(result, "symmetry_supported", None)
+    group = None if supported is None else (~np.asarray(supported(), dtype=bool)).astype(np.int64)
+    if features["score"] is not None and group is not None:
+        features["score_split"] = features["score"]
     vmap = np.asarray(result.symmetry_map(), dtype=np.int64)
     shapes = _shape_module()
     cleaned, vertex_map = shapes.clean(shape)
@@ -226,12 +232,17 @@ def reliability(result, shape, sym) -> dict | None:
         if value is None:
             out[key] = None
             continue
+        groups = 2 if key == "score_split" else 1
         which = np.minimum((value[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
+        if groups == 2:
+            which += MASS_BINS * group[scored]  # the supported vertices' bins, then the others'
+        size = groups * MASS_BINS
         out[key] = {
             "bins": MASS_BINS,
-            "count": np.bincount(which, minlength=MASS_BINS).tolist(),
-            "within_0.05": np.bincount(which, weights=err < 0.05, minlength=MASS_BINS).astype(int).tolist(),
-            "within_0.10": np.bincount(which, weights=err < 0.10, minlength=MASS_BINS).astype(int).tolist(),
+            "groups": groups,
+            "count": np.bincount(which, minlength=size).tolist(),
+            "within_0.05": np.bincount(which, weights=err < 0.05, minlength=size).astype(int).tolist(),
+            "within_0.10": np.bincount(which, weights=err < 0.10, minlength=size).astype(int).tolist(),
         }
     return out
 

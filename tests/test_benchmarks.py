@@ -118,6 +118,16 @@ def test_calibration_fit_is_the_weighted_isotonic_regression_by_hand():
     assert fitted == pytest.approx([0.275, 0.275, 0.95, 0.95])
 
 
+def test_calibration_fits_each_group_of_bins_on_its_own():
+    import calibration
+
+    # 2 groups of 2 bins: (0.8, 0.6) pools to 0.7 alone; (0.2, 0.4) is already monotone,
+    # though it lies below the first group
+    row = {"shape": "s", "class": "a", "reliability": {"bins": 2, "count": [10, 10, 5, 5], "within_0.05": [8, 6, 1, 2]}}
+    assert calibration.fit([row]) == pytest.approx([0.7, 0.7, 0.2, 0.4])
+    assert calibration.bin_centres([row]) == pytest.approx([0.25, 0.75, 0.25, 0.75])
+
+
 def test_calibration_ece_by_hand():
     import calibration
 

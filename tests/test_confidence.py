@@ -6,11 +6,27 @@ import pytest
 from intrinsym import confidence
 
 
-def test_calibration_table_is_a_non_decreasing_probability():
-    table = np.asarray(confidence.CALIBRATION)
+@pytest.mark.parametrize("name", ["CALIBRATION", "CALIBRATION_SPARSE"])
+def test_calibration_table_is_a_non_decreasing_probability(name):
+    table = np.asarray(getattr(confidence, name))
     assert table.shape == (20,)
     assert 0 <= table.min() and table.max() <= 1
     assert np.all(np.diff(table) >= 0)
+
+
+def test_calibrated_takes_the_sparse_table_where_not_supported():
+    centres = (np.arange(20) + 0.5) / 20
+    supported = np.arange(20) % 2 == 0
+    want = np.where(supported, confidence.CALIBRATION, confidence.CALIBRATION_SPARSE)
+    assert confidence.calibrated(centres, supported) == pytest.approx(want, abs=1e-6)
+    assert confidence.calibrated(centres, np.ones(20, bool)) == pytest.approx(confidence.calibrated(centres))
+
+
+def test_sample_support_by_hand():
+    # five samples on a path, 0.1 apart (edges listed out of order): within 0.25 of an end
+    # lie three samples, of the middle one all five; a sixth, isolated, counts itself
+    edges = np.array([[2, 3], [0, 1], [3, 4], [1, 2]])
+    assert confidence.sample_support(edges, np.full(4, 0.1), 6, 0.25).tolist() == [3, 4, 5, 4, 3, 1]
 
 
 def test_calibrated_interpolates_between_bin_centres():

@@ -5,11 +5,13 @@ import json
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import trimesh
+from scipy.sparse.csgraph import floyd_warshall
 
 import intrinsym
 from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
-from intrinsym.params import MAP_MARGIN
+from intrinsym.params import MAP_MARGIN, REFINE_REACH
 from intrinsym.shape import Shape, surface_area
 from intrinsym.support import Support
 
@@ -113,7 +115,14 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     apart = confidence.disagreement(spot.vertices, r.symmetry_map(), r.extraction_map(), scale)  # vs the extraction
     trip = confidence.round_trip(spot.vertices, r.symmetry_map(), scale)  # spot's mirror: its own inverse
     assert np.mean(trip < confidence.DISAGREEMENT_RANGE) > 0.9
-    expected = confidence.calibrated(confidence.score(conf, apart, trip))
+    # the table by whether the vertex's sample has the trilateration's k samples within
+    # its reach along the source graph (all-pairs shortest paths)
+    n_s = len(r.source_points)
+    lengths = sp.csr_matrix((r.support.edge_length, (r.edges[:, 0], r.edges[:, 1])), shape=(n_s, n_s))
+    around = (floyd_warshall(lengths, directed=False) <= REFINE_REACH).sum(axis=1)
+    supported = around[r.support.vertex_source] >= r.params.refine_anchors
+    assert not supported.any()  # 40 samples: none has 20 within reach, all take CALIBRATION_SPARSE
+    expected = confidence.calibrated(confidence.score(conf, apart, trip), supported)
     assert np.allclose(calibrated, np.where(r.symmetry_map() >= 0, expected, 0), atol=1e-5)
     assert r.global_confidence() == pytest.approx(float(calibrated.mean()))
     # the global confidence is the samples' mean confidence

@@ -22,12 +22,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
 
 from .geodesics import SparseDistances
 from .support import Support
 
 __all__ = [
     "CALIBRATION",
+    "CALIBRATION_SPARSE",
     "Bin",
     "calibrated",
     "calibration",
@@ -36,19 +39,28 @@ __all__ = [
     "map_mass",
     "mass_within",
     "round_trip",
+    "sample_support",
     "sample_images",
     "score",
     "vertex_confidence",
 ]
 
 
-#: The calibration of :func:`calibrated`: the share of vertices whose image lies within
-#: 0.05 sqrt(area) of the true one, per 1/20-wide bin of :func:`score` (value at the
-#: bin's centre), fitted (isotonic) over the TOSCA poses, KIDS and the mirror-posed scans
-#: by ``benchmarks/calibration.py``; docs/results.md checks it one held-out class at a time.
+#: The calibration of :func:`calibrated` for a vertex whose sample has the
+#: trilateration's anchors around it (:func:`sample_support`): the share of such vertices
+#: whose image lies within 0.05 sqrt(area) of the true one, per 1/20-wide bin of
+#: :func:`score` (value at the bin's centre), fitted (isotonic) over the TOSCA poses, KIDS
+#: and the mirror-posed scans by ``benchmarks/calibration.py``; docs/results.md checks it
+#: one held-out class at a time.
 CALIBRATION = (
-    0.585, 0.757, 0.757, 0.757, 0.757, 0.757, 0.768, 0.843, 0.876, 0.918,
-    0.933, 0.956, 0.972, 0.985, 0.992, 0.995, 0.997, 0.999, 0.999, 1.000,
+    0.729, 0.888, 0.888, 0.888, 0.888, 0.888, 0.911, 0.947, 0.960, 0.973,
+    0.985, 0.993, 0.996, 0.998, 0.999, 0.999, 1.000, 1.000, 1.000, 1.000,
+)  # fmt: skip
+#: The same for the other vertices (an extremity: a hand, a paw, where the global map is
+#: the spectral map's, less precise).
+CALIBRATION_SPARSE = (
+    0.274, 0.459, 0.459, 0.459, 0.459, 0.564, 0.646, 0.742, 0.774, 0.843,
+    0.853, 0.885, 0.907, 0.932, 0.952, 0.961, 0.970, 0.987, 0.987, 0.991,
 )  # fmt: skip
 
 
@@ -133,7 +145,7 @@ def score(mass: np.ndarray, apart: np.ndarray, trip: np.ndarray | None = None) -
     return factor
 
 
-def calibrated(mass: np.ndarray) -> np.ndarray:
+def calibrated(mass: np.ndarray, supported: np.ndarray | None = None) -> np.ndarray:
     """Per-vertex confidence from :func:`score`: the probability that the vertex's image
     lies within 0.05 sqrt(area) of its true image.
 
@@ -141,15 +153,51 @@ def calibrated(mass: np.ndarray) -> np.ndarray:
     ----------
     mass : (N,) float array in [0, 1]
         :func:`score` of every vertex.
+    supported : (N,) bool array, optional
+        Whether the vertex's sample has the trilateration's anchors around it
+        (:func:`sample_support`); None: every vertex.
 
     Returns
     -------
     (N,) float32 in [0, 1]
-        Linear interpolation of :data:`CALIBRATION` between the bin centres (constant
-        beyond the first and last).
+        Linear interpolation of :data:`CALIBRATION` (:data:`CALIBRATION_SPARSE` where not
+        ``supported``) between the bin centres (constant beyond the first and last).
     """
+    x = np.asarray(mass, dtype=np.float64)
     centres = (np.arange(len(CALIBRATION)) + 0.5) / len(CALIBRATION)
-    return np.interp(np.asarray(mass, dtype=np.float64), centres, CALIBRATION).astype(np.float32)
+    out = np.interp(x, centres, CALIBRATION)
+    if supported is not None:
+        out = np.where(supported, out, np.interp(x, centres, CALIBRATION_SPARSE))
+    return out.astype(np.float32)
+
+
+def sample_support(edges: np.ndarray, edge_length: np.ndarray, n_samples: int, reach: float) -> np.ndarray:
+    """Per source sample, how many samples (itself included) lie within ``reach`` of it
+    along the source graph.
+
+    The global map's trilateration (:func:`intrinsym.refine.trilaterate`) places a vertex
+    from its ``k`` nearest anchored samples within ``reach`` and leaves the vertices of an
+    extremity (a hand, a paw: fewer samples around) to the spectral map, which is less
+    precise there; their confidence has its own table (:data:`CALIBRATION_SPARSE`).
+
+    Parameters
+    ----------
+    edges : (E, 2) int
+        Source-graph edges (rows of the samples).
+    edge_length : (E,) float
+        Their geodesic lengths (sqrt(area) units).
+    n_samples : int
+    reach : float
+        sqrt(area) units.
+
+    Returns
+    -------
+    (S,) int64
+    """
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    lengths = np.asarray(edge_length, dtype=np.float64)
+    graph = sp.csr_matrix((lengths, (e[:, 0], e[:, 1])), shape=(n_samples, n_samples))
+    return np.isfinite(dijkstra(graph, directed=False, limit=reach)).sum(axis=1).astype(np.int64)
 
 
 def mass_within(marginals: np.ndarray, image: np.ndarray, targets: SparseDistances, radius: float) -> np.ndarray:

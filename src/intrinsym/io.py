@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import os
 import stat
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -200,12 +201,15 @@ def _trimesh_arrays(loaded, label: str, kind: str) -> tuple[np.ndarray, np.ndarr
 
 @contextmanager
 def _quiet_trimesh() -> Iterator[None]:
-    """Silence trimesh's log (it prints tracebacks for recoverable problems) while reading."""
+    """Silence trimesh's log (it prints tracebacks for recoverable problems) and its
+    numeric warnings on corrupt values (checked after reading) while reading."""
     logger = logging.getLogger("trimesh")
     previous = logger.level
     logger.setLevel(logging.CRITICAL)
     try:
-        yield
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            yield
     finally:
         logger.setLevel(previous)
 

@@ -19,11 +19,11 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
-from .confidence import calibrated, disagreement, map_mass, round_trip, score
+from .confidence import calibrated, disagreement, map_mass, round_trip, sample_support, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, save_npz, write_set
-from .params import Params
+from .params import REFINE_REACH, Params
 from .runinfo import RunInfo, stored_params
 from .support import Support
 from .vertex_maps import fitted_vertex_map
@@ -206,12 +206,26 @@ class Result:
         apart = disagreement(images, image, self.extraction_map(), scale)
         return score(mass, apart, round_trip(images, image, scale))
 
+    def symmetry_supported(self) -> np.ndarray:
+        """(N_in,) bool: per input vertex, whether its source sample has at least
+        ``params.refine_anchors`` samples within the trilateration's reach along the
+        source graph (:func:`intrinsym.confidence.sample_support`), which of the two
+        calibration tables its confidence takes; all True without a support."""
+        s = self.support
+        if s is None:
+            return np.ones(len(self.symmetry_map()), dtype=bool)
+        around = sample_support(self.edges, s.edge_length, len(self.source_points), REFINE_REACH)
+        cell = np.asarray(s.vertex_source, dtype=np.int64)
+        return (cell >= 0) & (around[np.maximum(cell, 0)] >= self.params.refine_anchors)
+
     def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image
         under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
         (``symmetry_confidence.npy``): :meth:`symmetry_score` through
-        :func:`intrinsym.confidence.calibrated`; 0 where the map gives no image."""
-        return np.where(self.symmetry_map() >= 0, calibrated(self.symmetry_score(mass)), 0.0).astype(np.float32)
+        :func:`intrinsym.confidence.calibrated`, by :meth:`symmetry_supported`; 0 where
+        the map gives no image."""
+        conf = calibrated(self.symmetry_score(mass), self.symmetry_supported())
+        return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
 
     def global_confidence(self) -> float | None:
         """The expected share of vertices whose image lies within 0.05 sqrt(area) of the
