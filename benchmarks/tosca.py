@@ -218,8 +218,7 @@ def reliability(result, shape, sym) -> dict | None:
     if features["mass"] is None:
         return None
     supported = getattr(result, "symmetry_supported", None)
-    group = None if supported is None else (~np.asarray(supported(), dtype=bool)).astype(np.int64)
-    if features["score"] is not None and group is not None:
+    if features["score"] is not None and supported is not None:
         features["score_split"] = features["score"]
     vmap = np.asarray(result.symmetry_map(), dtype=np.int64)
     shapes = _shape_module()
@@ -232,10 +231,11 @@ def reliability(result, shape, sym) -> dict | None:
         if value is None:
             out[key] = None
             continue
-        groups = 2 if key == "score_split" else 1
         which = np.minimum((value[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
-        if groups == 2:
-            which += MASS_BINS * group[scored]  # the supported vertices' bins, then the others'
+        groups = 1
+        if key == "score_split":  # the supported vertices' bins, then the others'
+            which += MASS_BINS * ~np.asarray(supported(), dtype=bool)[scored]
+            groups = 2
         size = groups * MASS_BINS
         out[key] = {
             "bins": MASS_BINS,

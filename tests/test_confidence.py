@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from intrinsym import confidence
+from intrinsym.support import SourceGraph
 
 
 @pytest.mark.parametrize("name", ["CALIBRATION", "CALIBRATION_SPARSE"])
@@ -26,7 +27,8 @@ def test_sample_support_by_hand():
     # five samples on a path, 0.1 apart (edges listed out of order): within 0.25 of an end
     # lie three samples, of the middle one all five; a sixth, isolated, counts itself
     edges = np.array([[2, 3], [0, 1], [3, 4], [1, 2]])
-    assert confidence.sample_support(edges, np.full(4, 0.1), 6, 0.25).tolist() == [3, 4, 5, 4, 3, 1]
+    graph = SourceGraph.from_edges(edges, np.full(4, 0.1), 6)
+    assert confidence.sample_support(graph, 0.25).tolist() == [3, 4, 5, 4, 3, 1]
 
 
 def test_calibrated_interpolates_between_bin_centres():

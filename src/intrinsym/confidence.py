@@ -26,7 +26,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from .geodesics import SparseDistances
-from .support import Support
+from .support import SourceGraph, Support
 
 __all__ = [
     "CALIBRATION",
@@ -171,7 +171,7 @@ def calibrated(mass: np.ndarray, supported: np.ndarray | None = None) -> np.ndar
     return out.astype(np.float32)
 
 
-def sample_support(edges: np.ndarray, edge_length: np.ndarray, n_samples: int, reach: float) -> np.ndarray:
+def sample_support(graph: SourceGraph, reach: float) -> np.ndarray:
     """Per source sample, how many samples (itself included) lie within ``reach`` of it
     along the source graph.
 
@@ -182,11 +182,8 @@ def sample_support(edges: np.ndarray, edge_length: np.ndarray, n_samples: int, r
 
     Parameters
     ----------
-    edges : (E, 2) int
-        Source-graph edges (rows of the samples).
-    edge_length : (E,) float
-        Their geodesic lengths (sqrt(area) units).
-    n_samples : int
+    graph : SourceGraph
+        The source graph with its geodesic edge lengths (sqrt(area) units).
     reach : float
         sqrt(area) units.
 
@@ -194,10 +191,9 @@ def sample_support(edges: np.ndarray, edge_length: np.ndarray, n_samples: int, r
     -------
     (S,) int64
     """
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    lengths = np.asarray(edge_length, dtype=np.float64)
-    graph = sp.csr_matrix((lengths, (e[:, 0], e[:, 1])), shape=(n_samples, n_samples))
-    return np.isfinite(dijkstra(graph, directed=False, limit=reach)).sum(axis=1).astype(np.int64)
+    n = len(graph.ptr) - 1
+    lengths = sp.csr_matrix((graph.length, graph.neighbour, graph.ptr), shape=(n, n))
+    return np.isfinite(dijkstra(lengths, directed=False, limit=reach)).sum(axis=1).astype(np.int64)
 
 
 def mass_within(marginals: np.ndarray, image: np.ndarray, targets: SparseDistances, radius: float) -> np.ndarray:

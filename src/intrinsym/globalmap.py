@@ -329,9 +329,10 @@ def refined_map(
 
     Anchors: each source sample's marginal argmax target, where it lies within
     ``p.mass_radius`` of the map's image of the sample, or where the map turns the
-    sample the wrong way round and the argmax keeps the geodesic distances to those
-    anchors better (:func:`intrinsym.refine.consistent_anchors`: a part the map
-    flipped); each vertex is trilaterated against its ``p.refine_anchors`` nearest
+    sample the wrong way round or (with ``p.remove_trivial``) moves it beyond
+    ``p.trivial_radius`` of itself, and the argmax keeps the geodesic distances to those
+    anchors better (:func:`intrinsym.refine.consistent_anchors`: a part the map flipped
+    or slid); each vertex is trilaterated against its ``p.refine_anchors`` nearest
     anchored samples, and keeps its image where that keeps the distances to within
     ``tolerance`` target spacings.
 

@@ -17,12 +17,12 @@ as precise as the anchors (a densely meshed, little posed head), and trilaterati
 would only add the anchors' own noise.
 
 The anchors are the marginals' argmax targets; a sample whose argmax lies farther than
-``agree`` from the map's own image of it is used only where the map turns that sample
-the wrong way round and the argmax keeps the geodesic distances to the agreeing anchors
-better than the map's image does (:func:`consistent_anchors`): there the spectral map
-flipped a part (a densely meshed head turned about the wrong axis) that the marginals
-place right. Elsewhere, the marginals refine the map only where they agree with the
-symmetry it chose.
+``agree`` from the map's own image of it is used only where the argmax keeps the
+geodesic distances to the agreeing anchors better than the map's image does and the map
+turned that sample the wrong way round, or moved it beyond the trivial radius of itself
+(:func:`consistent_anchors`): there the spectral map flipped or slid a part (a densely
+meshed head turned about the wrong axis) that the marginals place right. Elsewhere, the
+marginals refine the map only where they agree with the symmetry it chose.
 
 Trilateration moves each vertex on its own, so neighbouring images scatter by a vertex
 or two. :func:`spectral_descent` then projects the map once onto the Laplace-Beltrami

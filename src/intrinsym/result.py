@@ -25,7 +25,7 @@ from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, save_npz, write_set
 from .params import REFINE_REACH, Params
 from .runinfo import RunInfo, stored_params
-from .support import Support
+from .support import SourceGraph, Support
 from .vertex_maps import fitted_vertex_map
 
 #: What reading a truncated or corrupt result file raises.
@@ -214,7 +214,8 @@ class Result:
         s = self.support
         if s is None:
             return np.ones(len(self.symmetry_map()), dtype=bool)
-        around = sample_support(self.edges, s.edge_length, len(self.source_points), REFINE_REACH)
+        graph = SourceGraph.from_edges(self.edges, s.edge_length, len(self.source_points))
+        around = sample_support(graph, REFINE_REACH)
         cell = np.asarray(s.vertex_source, dtype=np.int64)
         return (cell >= 0) & (around[np.maximum(cell, 0)] >= self.params.refine_anchors)
 
