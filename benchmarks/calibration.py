@@ -5,15 +5,15 @@ with a global map holds histograms of the symmetry map's per-vertex score
 (``symmetry_score``: the marginal mass weighed by how far two global maps agree) and of
 its marginal mass alone (``symmetry_mass``), :data:`tosca.MASS_BINS` equal-width bins,
 with, per bin, how many vertices map within 0.05 of their true image; ``score_split``
-holds the score's bins twice, for the vertices with the trilateration's anchors around
-them (``symmetry_supported``) and for the others. From the ``--feature`` chosen (default
+holds the score's bins once per bin of the global map's local distortion
+(``Result.map_distortion``, :data:`intrinsym.confidence.DISTORTION_BINS`). From the
+``--feature`` chosen (default
 ``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
    0.05" on the bin centres, weighted by the vertex counts, one per group of bins; these
-   values are :data:`intrinsym.confidence.CALIBRATION` and ``CALIBRATION_SPARSE`` (the
-   script says whether the package's copy is the fit, and prints the fit to paste when it
-   is not);
+   values are the tables of :data:`intrinsym.confidence.CALIBRATION` (the script says
+   whether the package's copy is the fit, and prints the fit to paste when it is not);
 2. checks it leaving one class out: for each class, the fit on the other classes is
    applied to that class's vertices; the table gives the expected calibration error (10
    equal-width confidence bins) of the raw mass and of the calibrated confidence, and the
@@ -169,8 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         "--feature",
         choices=("score_split", "score", "mass"),
         default="score_split",
-        help="what is calibrated (score_split: the score, one table for the vertices with the trilateration's "
-        "anchors around them and one for the others)",
+        help="what is calibrated (score_split: the score, one table per bin of the map's local distortion)",
     )
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
     args = parser.parse_args(argv)
@@ -180,12 +179,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     text = markdown(rows)
     values = fit(rows)
-    names = ("CALIBRATION", "CALIBRATION_SPARSE")[: len(values) // len(confidence.CALIBRATION)]
-    shipped = np.concatenate([getattr(confidence, name) for name in names])
-    same = np.allclose(values, shipped, atol=5e-4)
-    tables = np.split(values, len(names))
+    shipped = np.concatenate(confidence.CALIBRATION)
+    same = values.shape == shipped.shape and np.allclose(values, shipped, atol=5e-4)
+    tables = np.split(values, len(values) // len(confidence.CALIBRATION[0]))
     text += f"\nFit on all {len(rows)} shapes ({'equal to' if same else 'differs from'} intrinsym.confidence's):\n\n"
-    text += "".join(f"{name} = ({', '.join(f'{v:.3f}' for v in t)})\n" for name, t in zip(names, tables, strict=True))
+    text += "CALIBRATION = (\n" + "".join(f"    ({', '.join(f'{v:.3f}' for v in t)}),\n" for t in tables) + ")\n"
     print(text)
     if args.out:
         args.out.write_text(text)

@@ -136,11 +136,7 @@ def _shape(name: str, data: Path | None) -> tuple[Shape, list[np.ndarray], bool,
         raise SystemExit(f"global_map.py: unknown shape {name}")
     case = found[0]
     mesh = intrinsym.load(case.mesh)
-    if case.truth is None:
-        truth = evaluate.extrinsic_mirror(mesh.vertices)[0]
-    else:
-        truth = evaluate.load_symmetry_map(case.truth, len(mesh.vertices))
-    return mesh, [truth], False, {}
+    return mesh, [case.truth_map(mesh)], False, {}
 
 
 def _errors(vmap: np.ndarray, truths: list[np.ndarray], mesh: Shape) -> tuple[dict, np.ndarray]:

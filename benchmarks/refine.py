@@ -34,7 +34,7 @@ from intrinsym import evaluate
 from intrinsym.globalmap import refined_map
 from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
 from intrinsym.surface import prepare
-from tosca import cases
+from tosca import cases, select
 
 
 def _scores(vmap: np.ndarray, mesh: intrinsym.Shape, truth: np.ndarray) -> tuple[float, float, float]:
@@ -46,11 +46,7 @@ def measure(case, saved: Path, settings: list[tuple[int, float]], exact: bool = 
     """One shape: scores before and at every setting, and the default setting's moved share
     (``exact``: the source samples anchored at their true images)."""
     mesh = intrinsym.load(case.mesh)
-    truth = (
-        evaluate.extrinsic_mirror(mesh.vertices)[0]
-        if case.truth is None
-        else evaluate.load_symmetry_map(case.truth, len(mesh.vertices))
-    )
+    truth = case.truth_map(mesh)
     folder = saved / case.name
     if (folder / "run.json").is_file():
         loaded = intrinsym.Result.load(folder)
@@ -122,8 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     if data is None:
         print(no_data("refine.py", args.data))
         return 0
-    wanted = set(args.shapes or [])
-    chosen = [c for c in cases(data) if not wanted or c.name in wanted or c.cls in wanted]
+    chosen = select(cases(data), args.shapes)
     first = (args.anchors[0], args.tolerances[0])
     settings = [first] + [(k, first[1]) for k in args.anchors[1:]] + [(first[0], t) for t in args.tolerances[1:]]
     rows = [r for r in (measure(c, args.saved, settings, args.exact_anchors) for c in chosen) if r is not None]

@@ -21,6 +21,9 @@ sqrt(area); what ``intrinsym evaluate`` reports), whether a global symmetry was 
 the distortion of that map and of the true one (:func:`intrinsym.distortion.map_distortion`:
 the share of vertex pairs within 0.5 whose geodesic distance the map changes by more
 than 0.05, which tells how near to an isometry the pose keeps its symmetry),
+where the true symmetry keeps local distances (the vertices whose
+:func:`intrinsym.distortion.local_distortion` is at most ``LOCAL_ISOMETRY``: pairs within
+0.1 changed by at most that on average) and both maps' scores there,
 the global/partial decision and the statistics behind it (the share of source edges
 BP's argmax keeps, the share of source samples it returns to when applied twice, and
 whether the identity was kept as "no partner"), how the global map was chosen
@@ -75,7 +78,7 @@ from pathlib import Path
 import numpy as np
 
 import intrinsym
-from intrinsym import distortion, evaluate, geodesics, spectral
+from intrinsym import confidence, distortion, evaluate, geodesics, spectral
 from intrinsym.params import RETURN_RADIUS
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
@@ -94,8 +97,15 @@ _REFLECTION = (
     f"share of source samples BP's argmax returns to within {RETURN_RADIUS} when applied twice "
     "and turns around (neighbours' order reversed)"
 )
+#: A vertex where the true symmetry changes the geodesic distances of the pairs around
+#: it (within ``distortion.LOCAL_RADIUS``) by at most this on average (sqrt(area) units)
+#: is one where an isometry-based method can be asked to find it: 1.8 times the largest
+#: mean of a true symmetry over the vertices where the found maps are right (SCAPE's
+#: reflection, 0.0056), below every mean of michael's symmetry file over the (finger)
+#: vertices the found maps miss (0.011-0.018; docs/results.md).
+LOCAL_ISOMETRY = 0.01
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 6
+CACHE_FORMAT = 7
 
 
 # --------------------------------------------------------------------------- shapes
@@ -109,6 +119,12 @@ class Case:
     cls: str
     mesh: Path
     truth: Path | None
+
+    def truth_map(self, mesh: intrinsym.Shape) -> np.ndarray:
+        """(N,) int64: the true image of every vertex of ``mesh`` (the loaded ``self.mesh``)."""
+        if self.truth is None:
+            return evaluate.extrinsic_mirror(mesh.vertices)[0]
+        return evaluate.load_symmetry_map(self.truth, len(mesh.vertices))
 
 
 def _class_of(stem: str) -> str:
@@ -209,16 +225,17 @@ def reliability(result, shape, sym) -> dict | None:
     confidence) and of its marginal mass (``symmetry_mass``): how many vertices fall in it
     and how many of them map within 0.05 / 0.10 of the true image (graph geodesics, units
     of sqrt(area)); keyed ``score`` and ``mass``, each None on code without it. Keyed
-    ``score_split``: the score's bins of the vertices with the trilateration's anchors
-    around them (``symmetry_supported``), then those of the others (``groups`` 2)."""
+    ``score_split``: the score's bins once per table of ``intrinsym.confidence.CALIBRATION``
+    (``groups``), each vertex in its table's, by the map's local distortion
+    (``Result.map_distortion``, :func:`intrinsym.confidence.distortion_group`)."""
     features = {}
     for key in ("score", "mass"):
         of = getattr(result, f"symmetry_{key}", None)
         features[key] = None if of is None else np.asarray(of(), dtype=np.float64)
     if features["mass"] is None:
         return None
-    supported = getattr(result, "symmetry_supported", None)
-    if features["score"] is not None and supported is not None:
+    local = getattr(result, "map_distortion", None)
+    if features["score"] is not None and local is not None:
         features["score_split"] = features["score"]
     vmap = np.asarray(result.symmetry_map(), dtype=np.int64)
     shapes = _shape_module()
@@ -233,9 +250,9 @@ def reliability(result, shape, sym) -> dict | None:
             continue
         which = np.minimum((value[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
         groups = 1
-        if key == "score_split":  # the supported vertices' bins, then the others'
-            which += MASS_BINS * ~np.asarray(supported(), dtype=bool)[scored]
-            groups = 2
+        if key == "score_split":  # each table's bins in turn
+            which += MASS_BINS * confidence.distortion_group(local, len(vmap))[scored]
+            groups = len(confidence.CALIBRATION)
         size = groups * MASS_BINS
         out[key] = {
             "bins": MASS_BINS,
@@ -337,6 +354,13 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     row["map"] = _map_row(evaluate.score_map(vmap, shape, sym))
     row["map"]["distortion"] = distortion.map_distortion(vmap, shape, seed=seed).as_dict()
     row["truth_distortion"] = distortion.map_distortion(sym, shape, seed=seed).as_dict()
+    # scored where the truth is locally isometric: elsewhere the truth is marked "none"
+    isometric = distortion.local_distortion(sym, shape) <= LOCAL_ISOMETRY
+    sym_isometric = np.where(isometric, sym, -1)
+    row["isometric"] = {
+        "share": float(isometric.mean()),
+        "map": _map_row(evaluate.score_map(vmap, shape, sym_isometric)),
+    }
     row["reliability"] = reliability(result, shape, sym) if row["global_found"] else None
     row["decision"] = decision(info)
     choice = field(info, "global_map")
@@ -357,8 +381,10 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     # back to input vertices: each cleaned vertex is represented by its first input vertex
     first = np.empty(len(cleaned.vertices), dtype=np.int64)
     first[vertex_map[::-1]] = np.arange(len(vertex_map))[::-1]
+    spectral_map = first[image[vertex_map]]
+    row["isometric"]["spectral"] = _map_row(evaluate.score_map(spectral_map, shape, sym_isometric))
     row["spectral"] = {
-        **_map_row(evaluate.score_map(first[image[vertex_map]], shape, sym)),
+        **_map_row(evaluate.score_map(spectral_map, shape, sym)),
         "seconds": spectral_seconds,
     }
     row["version"] = intrinsym.__version__
@@ -430,6 +456,9 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
         ("map mean error", ("map", "mean_error"), False, ".4f"),
         ("map distortion", ("map", "distortion", "above_0.05"), False, ".3f"),
         ("truth distortion", ("truth_distortion", "above_0.05"), False, ".3f"),
+        ("truth locally isometric", ("isometric", "share"), True, ".3f"),
+        ("map ≤0.05 there", ("isometric", "map", "within_0.05"), True, ".3f"),
+        ("map ≤0.10 there", ("isometric", "map", "within_0.10"), True, ".3f"),
         ("global found", ("global_found",), True, "bool"),
         ("identity share", ("decision", "statistic"), True, ".3f"),
         ("reflection", ("decision", "reflection"), True, ".3f"),
@@ -438,6 +467,7 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
         ("spectral ≤0.05", ("spectral", "within_0.05"), True, ".3f"),
         ("spectral ≤0.10", ("spectral", "within_0.10"), True, ".3f"),
         ("spectral mean error", ("spectral", "mean_error"), False, ".4f"),
+        ("spectral ≤0.05 there", ("isometric", "spectral", "within_0.05"), True, ".3f"),
         ("≤0.10 ours − spectral", ("delta_0.10",), True, "+.3f"),
         ("s detect", ("seconds_total",), False, ".1f"),
         ("s BP", ("seconds", "bp"), False, ".1f"),

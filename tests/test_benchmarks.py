@@ -170,3 +170,15 @@ def test_refine_table_by_hand(tmp_path, capsys):
     assert "largest loss within 0.05 -0.250 (a), within 0.10 +0.000" in lines[6]
     assert refine.main(["--data", str(tmp_path / "absent"), "--saved", str(tmp_path)]) == 0
     assert "skipped" in capsys.readouterr().out
+
+
+def test_local_isometry_table_by_hand(tmp_path, capsys):
+    import local_isometry
+
+    row = {"shape": "a", "miss": 0.125, ("map", "misses"): 0.02, ("truth", "misses"): 0.0}
+    row |= {("map", "hits"): 0.004, ("truth", "hits"): 0.00125}
+    lines = local_isometry.markdown([row]).splitlines()
+    assert lines[0].startswith("| shape | misses (> 0.05) | map at the misses | truth at the misses |")
+    assert lines[2] == "| a | 0.125 | 0.0200 | 0.0000 | 0.0040 | 0.0013 |"
+    assert local_isometry.main(["--data", str(tmp_path / "absent"), "--saved", str(tmp_path)]) == 0
+    assert "skipped" in capsys.readouterr().out

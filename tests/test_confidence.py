@@ -4,35 +4,36 @@ import numpy as np
 import pytest
 
 from intrinsym import confidence
-from intrinsym.support import SourceGraph
 
 
-@pytest.mark.parametrize("name", ["CALIBRATION", "CALIBRATION_SPARSE"])
-def test_calibration_table_is_a_non_decreasing_probability(name):
-    table = np.asarray(getattr(confidence, name))
+@pytest.mark.parametrize("group", range(len(confidence.DISTORTION_BINS) + 1))
+def test_calibration_table_is_a_non_decreasing_probability(group):
+    assert len(confidence.CALIBRATION) == len(confidence.DISTORTION_BINS) + 1
+    table = np.asarray(confidence.CALIBRATION[group])
     assert table.shape == (20,)
     assert 0 <= table.min() and table.max() <= 1
     assert np.all(np.diff(table) >= 0)
 
 
-def test_calibrated_takes_the_sparse_table_where_not_supported():
+def test_distortion_group_by_hand():
+    lo, hi = confidence.DISTORTION_BINS
+    d = np.array([0.0, lo / 2, lo, (lo + hi) / 2, hi, 2 * hi, np.nan])
+    assert confidence.distortion_group(d, len(d)).tolist() == [0, 0, 1, 1, 2, 2, 2]
+    assert confidence.distortion_group(None, 3).tolist() == [0, 0, 0]
+
+
+def test_calibrated_takes_the_table_of_the_distortion_bin():
     centres = (np.arange(20) + 0.5) / 20
-    supported = np.arange(20) % 2 == 0
-    want = np.where(supported, confidence.CALIBRATION, confidence.CALIBRATION_SPARSE)
-    assert confidence.calibrated(centres, supported) == pytest.approx(want, abs=1e-6)
-    assert confidence.calibrated(centres, np.ones(20, bool)) == pytest.approx(confidence.calibrated(centres))
-
-
-def test_sample_support_by_hand():
-    # five samples on a path, 0.1 apart (edges listed out of order): within 0.25 of an end
-    # lie three samples, of the middle one all five; a sixth, isolated, counts itself
-    edges = np.array([[2, 3], [0, 1], [3, 4], [1, 2]])
-    graph = SourceGraph.from_edges(edges, np.full(4, 0.1), 6)
-    assert confidence.sample_support(graph, 0.25).tolist() == [3, 4, 5, 4, 3, 1]
+    lo, hi = confidence.DISTORTION_BINS
+    d = np.array([lo / 2, (lo + hi) / 2, 2 * hi, np.nan] * 5)
+    tables = np.asarray(confidence.CALIBRATION)
+    want = tables[[0, 1, 2, 2] * 5, np.arange(20)]
+    assert confidence.calibrated(centres, d) == pytest.approx(want, abs=1e-6)
+    assert confidence.calibrated(centres, np.zeros(20)) == pytest.approx(confidence.calibrated(centres))
 
 
 def test_calibrated_interpolates_between_bin_centres():
-    table = np.asarray(confidence.CALIBRATION)
+    table = np.asarray(confidence.CALIBRATION[0])
     centres = (np.arange(20) + 0.5) / 20
     assert confidence.calibrated(centres) == pytest.approx(table, abs=1e-6)
     mid = confidence.calibrated(np.array([0.05]))[0]  # halfway between the first two centres

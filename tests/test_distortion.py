@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from intrinsym.distortion import map_distortion
+from intrinsym.distortion import local_distortion, map_distortion
 from intrinsym.shape import from_arrays
 
 
@@ -58,3 +58,35 @@ def test_map_distortion_leaves_out_unmapped_vertices_and_checks_the_shape():
     assert map_distortion(np.full(len(v), -1), shape).n_pairs == 0
     with pytest.raises(ValueError, match="expected"):
         map_distortion(np.arange(len(v) - 1), shape)
+
+
+def test_local_distortion_against_euclidean_distances():
+    n = 24
+    v, f = unit_square_grid(n)
+    shape = from_arrays(v, f)
+    i, j = np.rint(v[:, 0] * n).astype(int), np.rint(v[:, 1] * n).astype(int)
+    # a spacing below the grid step: every vertex is measured from itself
+    fine = {"radius": 0.15, "spacing": 0.5 / n, "clip": 0.15}
+    reflection = (n - i) * (n + 1) + j
+    assert np.nanmax(local_distortion(reflection, shape, **fine)) < 0.005
+    squeeze = np.rint(n * (i / n) ** 2).astype(int) * (n + 1) + j
+    got = local_distortion(squeeze, shape, **fine)
+    d = np.linalg.norm(v[:, None, :2] - v[None, :, :2], axis=2)
+    near = d <= fine["radius"]
+    change = np.abs(np.linalg.norm(v[squeeze][:, None, :2] - v[squeeze][None, :, :2], axis=2) - d)
+    expected = (change * near).sum(axis=1) / near.sum(axis=1)
+    assert np.abs(got - expected).max() < 0.01
+    # x -> x^2 has slope 2x: it stretches lengths near x = 1 and keeps them near x = 1/2
+    right, middle = (i == n - 2) & (j == n // 2), (i == n // 2) & (j == n // 2)
+    assert got[right][0] > 2 * got[middle][0] > 0
+
+
+def test_local_distortion_is_nan_where_nothing_is_mapped():
+    v, f = unit_square_grid(12)
+    shape = from_arrays(v, f)
+    half = np.where(v[:, 0] < 0.5, np.arange(len(v)), -1)
+    got = local_distortion(half, shape, spacing=0.05)
+    assert np.all(got[v[:, 0] < 0.4] < 1e-9)
+    assert np.all(np.isnan(got[v[:, 0] > 0.6]))
+    with pytest.raises(ValueError, match="expected"):
+        local_distortion(np.arange(len(v) - 1), shape)

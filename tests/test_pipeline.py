@@ -5,13 +5,12 @@ import json
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 import trimesh
-from scipy.sparse.csgraph import floyd_warshall
 
 import intrinsym
 from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
-from intrinsym.params import MAP_MARGIN, REFINE_REACH
+from intrinsym.distortion import local_distortion
+from intrinsym.params import MAP_MARGIN
 from intrinsym.shape import Shape, surface_area
 from intrinsym.support import Support
 
@@ -62,7 +61,7 @@ def test_result_contract(spot, spot_result, tmp_path):
     with np.load(out / "result.npz") as z:
         # one shape: its input vertices are stored once, as source_mesh_vertices
         assert sorted(z.files) == sorted(
-            intrinsym.Result.ARRAYS + Support.KEYS + ("source_mesh_vertices", "zoomout_map")
+            intrinsym.Result.ARRAYS + Support.KEYS + ("source_mesh_vertices", "zoomout_map", "map_distortion")
         )
     assert (out / "symmetry_mass.npy").is_file()
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
@@ -115,14 +114,14 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     apart = confidence.disagreement(spot.vertices, r.symmetry_map(), r.extraction_map(), scale)  # vs the extraction
     trip = confidence.round_trip(spot.vertices, r.symmetry_map(), scale)  # spot's mirror: its own inverse
     assert np.mean(trip < confidence.DISAGREEMENT_RANGE) > 0.9
-    # the table by whether the vertex's sample has the trilateration's k samples within
-    # its reach along the source graph (all-pairs shortest paths)
-    n_s = len(r.source_points)
-    lengths = sp.csr_matrix((r.support.edge_length, (r.edges[:, 0], r.edges[:, 1])), shape=(n_s, n_s))
-    around = (floyd_warshall(lengths, directed=False) <= REFINE_REACH).sum(axis=1)
-    supported = around[r.support.vertex_source] >= r.params.refine_anchors
-    assert not supported.any()  # 40 samples: none has 20 within reach, all take CALIBRATION_SPARSE
-    expected = confidence.calibrated(confidence.score(conf, apart, trip), supported)
+    # the table by the map's local distortion: spot's map is its reflection, an isometry
+    # up to the graph's metrication, as the reflection's own distortion on the mesh says
+    assert r.map_distortion.shape == (len(spot.vertices),) and r.map_distortion.dtype == np.float32
+    assert np.array_equal(intrinsym.Result.load(out).map_distortion, r.map_distortion)
+    assert np.all(np.isfinite(r.map_distortion))
+    mirror = local_distortion(evaluate.extrinsic_mirror(spot.vertices)[0], spot)
+    assert np.median(r.map_distortion) < 2 * np.median(mirror) + 0.002
+    expected = confidence.calibrated(confidence.score(conf, apart, trip), r.map_distortion)
     assert np.allclose(calibrated, np.where(r.symmetry_map() >= 0, expected, 0), atol=1e-5)
     assert r.global_confidence() == pytest.approx(float(calibrated.mean()))
     # the global confidence is the samples' mean confidence

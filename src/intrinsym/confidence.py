@@ -12,7 +12,8 @@ value of the source sample whose Voronoi cell holds it (:func:`vertex_confidence
 The mass is not a calibrated probability: BP's marginals are sharper than the map's
 errors on posed shapes. :func:`score` weighs it by how far two global maps agree on each
 image, and :func:`calibrated` maps that through a non-decreasing table fitted on posed
-shapes to the probability that a vertex's image lies within 0.05 of the true one
+shapes (one per bin of how far the map keeps the distances around the vertex) to the
+probability that a vertex's image lies within 0.05 of the true one
 (``symmetry_confidence.npy``); docs/results.md checks that table on held-out classes with
 :func:`calibration` (reliability table and expected calibration error).
 """
@@ -22,45 +23,50 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 
 from .geodesics import SparseDistances
-from .support import SourceGraph, Support
+from .support import Support
 
 __all__ = [
     "CALIBRATION",
-    "CALIBRATION_SPARSE",
+    "DISTORTION_BINS",
     "Bin",
     "calibrated",
     "calibration",
     "disagreement",
+    "distortion_group",
     "kept_mass",
     "map_mass",
     "mass_within",
     "round_trip",
-    "sample_support",
     "sample_images",
     "score",
     "vertex_confidence",
 ]
 
 
-#: The calibration of :func:`calibrated` for a vertex whose sample has the
-#: trilateration's anchors around it (:func:`sample_support`): the share of such vertices
-#: whose image lies within 0.05 sqrt(area) of the true one, per 1/20-wide bin of
-#: :func:`score` (value at the bin's centre), fitted (isotonic) over the TOSCA poses, KIDS
-#: and the mirror-posed scans by ``benchmarks/calibration.py``; docs/results.md checks it
-#: one held-out class at a time.
+#: Bin edges of the global map's local distortion (:func:`intrinsym.distortion.local_distortion`,
+#: sqrt(area) units) that pick a vertex's table in :data:`CALIBRATION`: where the map
+#: keeps the distances around a vertex, its image is more often right at the same score.
+DISTORTION_BINS = (0.01, 0.02)
+#: The calibration of :func:`calibrated`, one table per bin of the local distortion
+#: (below 0.01, 0.01-0.02, above 0.02): the share of vertices whose image lies within
+#: 0.05 sqrt(area) of the true one, per 1/20-wide bin of :func:`score` (value at the
+#: bin's centre), fitted (isotonic) over the TOSCA poses, KIDS and the mirror-posed scans
+#: by ``benchmarks/calibration.py``; docs/results.md checks it one held-out class at a time.
 CALIBRATION = (
-    0.729, 0.888, 0.888, 0.888, 0.888, 0.888, 0.911, 0.947, 0.960, 0.973,
-    0.985, 0.993, 0.996, 0.998, 0.999, 0.999, 1.000, 1.000, 1.000, 1.000,
-)  # fmt: skip
-#: The same for the other vertices (an extremity: a hand, a paw, where the global map is
-#: the spectral map's, less precise).
-CALIBRATION_SPARSE = (
-    0.274, 0.459, 0.459, 0.459, 0.459, 0.564, 0.646, 0.742, 0.774, 0.843,
-    0.853, 0.885, 0.907, 0.932, 0.952, 0.961, 0.970, 0.987, 0.987, 0.991,
+    (
+        0.945, 0.945, 0.945, 0.945, 0.945, 0.945, 0.945, 0.947, 0.957, 0.973,
+        0.973, 0.980, 0.984, 0.990, 0.995, 0.997, 0.998, 0.999, 1.000, 1.000,
+    ),
+    (
+        0.691, 0.780, 0.780, 0.780, 0.780, 0.783, 0.783, 0.814, 0.849, 0.876,
+        0.906, 0.941, 0.953, 0.962, 0.980, 0.985, 0.991, 0.991, 0.991, 0.993,
+    ),
+    (
+        0.121, 0.432, 0.432, 0.432, 0.432, 0.478, 0.619, 0.710, 0.745, 0.830,
+        0.835, 0.835, 0.903, 0.965, 0.965, 0.965, 0.965, 0.965, 0.965, 1.000,
+    ),
 )  # fmt: skip
 
 
@@ -145,7 +151,17 @@ def score(mass: np.ndarray, apart: np.ndarray, trip: np.ndarray | None = None) -
     return factor
 
 
-def calibrated(mass: np.ndarray, supported: np.ndarray | None = None) -> np.ndarray:
+def distortion_group(distortion: np.ndarray | None, n: int) -> np.ndarray:
+    """(n,) int64: the table of :data:`CALIBRATION` each vertex takes, by its local
+    distortion's bin (:data:`DISTORTION_BINS`); NaN (unknown) takes the last, None
+    (a result without it) the first."""
+    if distortion is None:
+        return np.zeros(n, dtype=np.int64)
+    d = np.asarray(distortion, dtype=np.float64)
+    return np.where(np.isnan(d), len(DISTORTION_BINS), np.digitize(d, DISTORTION_BINS)).astype(np.int64)
+
+
+def calibrated(mass: np.ndarray, distortion: np.ndarray | None = None) -> np.ndarray:
     """Per-vertex confidence from :func:`score`: the probability that the vertex's image
     lies within 0.05 sqrt(area) of its true image.
 
@@ -153,47 +169,26 @@ def calibrated(mass: np.ndarray, supported: np.ndarray | None = None) -> np.ndar
     ----------
     mass : (N,) float array in [0, 1]
         :func:`score` of every vertex.
-    supported : (N,) bool array, optional
-        Whether the vertex's sample has the trilateration's anchors around it
-        (:func:`sample_support`); None: every vertex.
+    distortion : (N,) float array, optional
+        The global map's local distortion at every vertex
+        (:func:`intrinsym.distortion.local_distortion`, sqrt(area) units; NaN unknown);
+        None: every vertex takes the first table.
 
     Returns
     -------
     (N,) float32 in [0, 1]
-        Linear interpolation of :data:`CALIBRATION` (:data:`CALIBRATION_SPARSE` where not
-        ``supported``) between the bin centres (constant beyond the first and last).
+        Linear interpolation of the vertex's table of :data:`CALIBRATION`
+        (:func:`distortion_group`) between the bin centres (constant beyond the first
+        and last).
     """
     x = np.asarray(mass, dtype=np.float64)
-    centres = (np.arange(len(CALIBRATION)) + 0.5) / len(CALIBRATION)
-    out = np.interp(x, centres, CALIBRATION)
-    if supported is not None:
-        out = np.where(supported, out, np.interp(x, centres, CALIBRATION_SPARSE))
+    group = distortion_group(distortion, len(x))
+    out = np.empty(len(x))
+    for g, table in enumerate(CALIBRATION):
+        centres = (np.arange(len(table)) + 0.5) / len(table)
+        inside = group == g
+        out[inside] = np.interp(x[inside], centres, table)
     return out.astype(np.float32)
-
-
-def sample_support(graph: SourceGraph, reach: float) -> np.ndarray:
-    """Per source sample, how many samples (itself included) lie within ``reach`` of it
-    along the source graph.
-
-    The global map's trilateration (:func:`intrinsym.refine.trilaterate`) places a vertex
-    from its ``k`` nearest anchored samples within ``reach`` and leaves the vertices of an
-    extremity (a hand, a paw: fewer samples around) to the spectral map, which is less
-    precise there; their confidence has its own table (:data:`CALIBRATION_SPARSE`).
-
-    Parameters
-    ----------
-    graph : SourceGraph
-        The source graph with its geodesic edge lengths (sqrt(area) units).
-    reach : float
-        sqrt(area) units.
-
-    Returns
-    -------
-    (S,) int64
-    """
-    n = len(graph.ptr) - 1
-    lengths = sp.csr_matrix((graph.length, graph.neighbour, graph.ptr), shape=(n, n))
-    return np.isfinite(dijkstra(lengths, directed=False, limit=reach)).sum(axis=1).astype(np.int64)
 
 
 def mass_within(marginals: np.ndarray, image: np.ndarray, targets: SparseDistances, radius: float) -> np.ndarray:

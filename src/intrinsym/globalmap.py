@@ -21,7 +21,9 @@ when they keep ``MAP_MARGIN`` more.
 The winner is then refined by geodesic trilateration to the marginals' sample images
 (:func:`refined_map`, :mod:`intrinsym.refine`) and smoothed by one projection onto the
 eigenfunctions (:func:`smoothed_map`, kept unless it keeps ``MAP_MARGIN`` less mass), and
-its kept mass is recorded as the global map's mass (``run.json``'s ``global_map``). Only a run whose extraction found a
+its kept mass is recorded as the global map's mass (``run.json``'s ``global_map``); its
+local distortion (:func:`local_map_distortion`) picks the confidence's calibration
+table. Only a run whose extraction found a
 global symmetry gets a global map: the spectral candidates replace a weak map, they
 never invent a global symmetry.
 """
@@ -33,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import spectral
+from . import distortion, spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
 from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, SMOOTH_POINTS, Params
@@ -311,6 +313,19 @@ def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) ->
     out = vertex_map.copy()
     out[has[moved]] = _input_images(surface, image[moved])
     return out
+
+
+def local_map_distortion(surface: Surface, vertex_map: np.ndarray) -> np.ndarray:
+    """(N_in,) float32: the local distortion of a self-map of the input vertices
+    (:func:`intrinsym.distortion.local_distortion`), measured on the working shape's
+    graph (each input vertex at its working vertex); NaN where unknown."""
+    work = surface.vertex_map
+    vertex_map = np.asarray(vertex_map, dtype=np.int64)
+    has = vertex_map >= 0
+    image = np.full(len(surface.shape.vertices), -1, dtype=np.int64)
+    image[work[has]] = work[vertex_map[has]]
+    local = distortion.local_distortion_on_graph(surface.graph, surface.shape.vertices, image)
+    return np.where(has, local[work], np.nan).astype(np.float32)
 
 
 def refined_map(

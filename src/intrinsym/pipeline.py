@@ -22,7 +22,7 @@ import numpy as np
 from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
 from .extract import Extraction, consistency, extract_from_support
-from .globalmap import choose_global_map
+from .globalmap import choose_global_map, local_map_distortion
 from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, RETURN_RADIUS, WORK_PER_SAMPLE, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
 from .reflection import reflection
@@ -335,7 +335,7 @@ def _solve(
     extraction = extract_symmetries(src, tgt, ps, pt, edges, support, outcome, p)
     clock.lap("extract")
     source_vertex = src.nearest_input_vertex(src.shape.vertices[ps])
-    chosen = None
+    chosen, map_distortion = None, None
     if self_match and extraction.global_symmetry is not None:
         fit = (
             edges,
@@ -357,6 +357,7 @@ def _solve(
             p,
             device=outcome.runs[0].backend,  # the GPU that ran BP runs the dense searches
         )
+        map_distortion = local_map_distortion(src, chosen.vertex_map)
         clock.lap("global_map")
     sizes = Sizes(
         source=len(ps),
@@ -403,6 +404,7 @@ def _solve(
         extraction=extraction,
         zoomout_map=None if chosen is None else chosen.vertex_map,
         pass_marginals=np.stack([m for m, _ in outcome.passes]) if outcome.passes else None,
+        map_distortion=map_distortion,
     )
 
 

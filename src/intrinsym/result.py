@@ -19,13 +19,13 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
-from .confidence import calibrated, disagreement, map_mass, round_trip, sample_support, score
+from .confidence import calibrated, disagreement, map_mass, round_trip, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, save_npz, write_set
-from .params import REFINE_REACH, Params
+from .params import Params
 from .runinfo import RunInfo, stored_params
-from .support import SourceGraph, Support
+from .support import Support
 from .vertex_maps import fitted_vertex_map
 
 #: What reading a truncated or corrupt result file raises.
@@ -70,6 +70,11 @@ class Result:
     pass_marginals : (P - 1, S, T) float32 or None
         Marginals of the BP passes after the first (``Params.passes``); None for one
         pass. Their unaries follow from ``unary`` (:attr:`passes`).
+    map_distortion : (N_in,) float32 or None
+        The local distortion of ``zoomout_map`` at every input vertex
+        (:func:`intrinsym.distortion.local_distortion`, sqrt(area) units, NaN where
+        unknown), which picks the confidence's calibration table; None without it (a
+        result of an earlier version: the first table).
     """
 
     source_points: np.ndarray
@@ -85,6 +90,7 @@ class Result:
     extraction: Extraction | None = None
     zoomout_map: np.ndarray | None = None
     pass_marginals: np.ndarray | None = None
+    map_distortion: np.ndarray | None = None
 
     #: Every file of the result set (:meth:`save` writes those the result has).
     FILES: ClassVar[tuple[str, ...]] = (
@@ -206,26 +212,13 @@ class Result:
         apart = disagreement(images, image, self.extraction_map(), scale)
         return score(mass, apart, round_trip(images, image, scale))
 
-    def symmetry_supported(self) -> np.ndarray:
-        """(N_in,) bool: per input vertex, whether its source sample has at least
-        ``params.refine_anchors`` samples within the trilateration's reach along the
-        source graph (:func:`intrinsym.confidence.sample_support`), which of the two
-        calibration tables its confidence takes; all True without a support."""
-        s = self.support
-        if s is None:
-            return np.ones(len(self.symmetry_map()), dtype=bool)
-        graph = SourceGraph.from_edges(self.edges, s.edge_length, len(self.source_points))
-        around = sample_support(graph, REFINE_REACH)
-        cell = np.asarray(s.vertex_source, dtype=np.int64)
-        return (cell >= 0) & (around[np.maximum(cell, 0)] >= self.params.refine_anchors)
-
     def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image
         under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
         (``symmetry_confidence.npy``): :meth:`symmetry_score` through
-        :func:`intrinsym.confidence.calibrated`, by :meth:`symmetry_supported`; 0 where
-        the map gives no image."""
-        conf = calibrated(self.symmetry_score(mass), self.symmetry_supported())
+        :func:`intrinsym.confidence.calibrated`, by the map's local distortion
+        (:attr:`map_distortion`); 0 where the map gives no image."""
+        conf = calibrated(self.symmetry_score(mass), self.map_distortion)
         return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
 
     def global_confidence(self) -> float | None:
@@ -254,6 +247,8 @@ class Result:
             arrays["zoomout_map"] = np.asarray(self.zoomout_map, dtype=np.int64)
         if self.pass_marginals is not None:
             arrays["pass_marginals"] = np.asarray(self.pass_marginals, dtype=np.float32)
+        if self.map_distortion is not None:
+            arrays["map_distortion"] = np.asarray(self.map_distortion, dtype=np.float32)
         run = self.run_json()
 
         def write_json(content: Any, indent: int | None = None) -> Writer:
@@ -307,6 +302,7 @@ class Result:
                     raise ResultError(f"{name}: lacks {', '.join(missing)}")
                 support = Support.from_arrays(z) if Support.stored_in(z.files) else None
                 zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
+                map_distortion = get("map_distortion")
             name = out / "run.json"
             run = json.loads(name.read_text())
             params = Params(**stored_params(run))
@@ -321,4 +317,5 @@ class Result:
             support=support,
             zoomout_map=zoomout_map,
             pass_marginals=pass_marginals,
+            map_distortion=map_distortion,
         )
