@@ -10,7 +10,7 @@ import intrinsym
 from conftest import shared
 from intrinsym import evaluate, laplacian, shapes, spectral
 from intrinsym.extract import Symmetry
-from intrinsym.globalmap import smoothed_map, zoomout_map
+from intrinsym.globalmap import local_map_distortion, smoothed_map, zoomout_map
 from intrinsym.params import GUIDE_TOLERANCE, SMOOTH_POINTS
 from intrinsym.shape import from_arrays
 from intrinsym.surface import prepare, sample
@@ -121,3 +121,35 @@ def test_a_tail_on_the_mirror_plane_maps_onto_itself():
     truth = evaluate.load_symmetry_map(mesh.parent / "cat.sym", len(shape.vertices))
     scores = evaluate.score_map(intrinsym.detect(shape, seed=0).symmetry_map(), shape, truth)
     assert scores.within(0.10) > 0.995 and scores.within(0.05) > 0.9
+
+
+def _square(n):
+    """The unit square as a triangulated (n+1) x (n+1) grid, vertex i*(n+1)+j at (i/n, j/n)."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    v = np.column_stack([i.ravel() / n, j.ravel() / n, np.zeros(i.size)])
+    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    f = np.concatenate([np.column_stack([a, a + n + 1, a + 1]), np.column_stack([a + 1, a + n + 1, a + n + 2])])
+    return from_arrays(v, f), i.ravel(), j.ravel()
+
+
+def test_local_map_distortion_of_a_subdivided_square():
+    # a coarse flat square, subdivided to a finer working shape: the map of its input
+    # vertices is measured on the working graph, each input vertex at its working vertex
+    n = 16
+    square, ii, jj = _square(n)
+    surface = prepare(square, 4 * len(ii))
+    assert len(surface.shape.vertices) > 2 * len(ii)
+    reflection = (n - ii) * (n + 1) + jj
+    got = local_map_distortion(surface, reflection)
+    assert got.shape == (len(ii),) and got.dtype == np.float32
+    assert np.nanmax(got) < 0.01  # an isometry, up to the graph's metrication
+    # x -> x^2 (snapped to the input grid) stretches the square's right side
+    squeeze = np.rint(n * (ii / n) ** 2).astype(int) * (n + 1) + jj
+    stretched = local_map_distortion(surface, squeeze)
+    assert np.nanmean(stretched[ii == n]) > 5 * np.nanmax(got)
+    # no image, no value
+    partial = np.where(ii < n // 2, reflection, -1)
+    assert np.isnan(local_map_distortion(surface, partial)[ii >= n // 2]).all()
+    # input vertices 0.25 apart, beyond the pairs' radius: no pair, unknown
+    square, ii, jj = _square(4)
+    assert np.isnan(local_map_distortion(prepare(square, 200), (4 - ii) * 5 + jj)).all()

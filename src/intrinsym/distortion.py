@@ -188,7 +188,7 @@ def local_distortion_on_graph(
     seeds = np.sort(mapped[farthest_point_sampling(np.asarray(points)[mapped], spacing=spacing, seed=0)])
     arrays = csr_arrays(graph)
     rows, ys, d = ball_pairs(arrays, seeds, radius)
-    keep = image[ys] >= 0
+    keep = (image[ys] >= 0) & (ys != seeds[rows])
     rows, ys, d = rows[keep], ys[keep], d[keep]
     # d(T x, T y) from the balls about the images, looked up by sorted (row, vertex) keys
     i_rows, i_cols, i_d = ball_pairs(arrays, image[seeds], radius + clip)
