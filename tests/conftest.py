@@ -100,3 +100,13 @@ def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
         v[sources], v.copy(), sources, np.arange(len(v)), edges.astype(np.int64), marginals, marginals, Params(), info
     ).save(out)
     return out, v
+
+
+def unit_square_grid(n=24):
+    """The unit square (area 1) as a triangulated (n+1) x (n+1) grid, vertex i*(n+1)+j at
+    (i/n, j/n): flat and convex, so geodesics are straight lines."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    v = np.column_stack([i.ravel() / n, j.ravel() / n, np.zeros(i.size)])
+    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    f = np.concatenate([np.column_stack([a, a + n + 1, a + 1]), np.column_stack([a + 1, a + n + 1, a + n + 2])])
+    return v, f

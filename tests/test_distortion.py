@@ -5,18 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import unit_square_grid
 from intrinsym.distortion import local_distortion, map_distortion
 from intrinsym.shape import from_arrays
-
-
-def unit_square_grid(n=24):
-    """The unit square (area 1) as a triangulated (n+1) x (n+1) grid, vertex i*(n+1)+j at
-    (i/n, j/n): flat and convex, so geodesics are straight lines."""
-    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-    v = np.column_stack([i.ravel() / n, j.ravel() / n, np.zeros(i.size)])
-    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
-    f = np.concatenate([np.column_stack([a, a + n + 1, a + 1]), np.column_stack([a + 1, a + n + 1, a + n + 2])])
-    return v, f
 
 
 def test_map_distortion_against_euclidean_distances():

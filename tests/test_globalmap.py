@@ -7,7 +7,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 import intrinsym
-from conftest import shared
+from conftest import shared, unit_square_grid
 from intrinsym import evaluate, laplacian, shapes, spectral
 from intrinsym.extract import Symmetry
 from intrinsym.globalmap import local_map_distortion, smoothed_map, zoomout_map
@@ -124,12 +124,10 @@ def test_a_tail_on_the_mirror_plane_maps_onto_itself():
 
 
 def _square(n):
-    """The unit square as a triangulated (n+1) x (n+1) grid, vertex i*(n+1)+j at (i/n, j/n)."""
-    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-    v = np.column_stack([i.ravel() / n, j.ravel() / n, np.zeros(i.size)])
-    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
-    f = np.concatenate([np.column_stack([a, a + n + 1, a + 1]), np.column_stack([a + 1, a + n + 1, a + n + 2])])
-    return from_arrays(v, f), i.ravel(), j.ravel()
+    """:func:`conftest.unit_square_grid` as a Shape, with each vertex's grid indices (i, j)."""
+    v, f = unit_square_grid(n)
+    i, j = np.divmod(np.arange(len(v)), n + 1)
+    return from_arrays(v, f), i, j
 
 
 def test_local_map_distortion_of_a_subdivided_square():
