@@ -7,8 +7,7 @@ its marginal mass alone (``symmetry_mass``), :data:`tosca.MASS_BINS` equal-width
 with, per bin, how many vertices map within 0.05 of their true image; ``score_split``
 holds the score's bins once per bin of the global map's local distortion
 (``Result.map_distortion``, :data:`intrinsym.confidence.DISTORTION_BINS`). From the
-``--feature`` chosen (default
-``score_split``, what the package calibrates) it
+``--feature`` chosen (default ``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
    0.05" on the bin centres, weighted by the vertex counts, one per group of bins; these
@@ -81,8 +80,8 @@ def _isotonic(count: np.ndarray, within: np.ndarray) -> np.ndarray:
 
 def fit(rows: list[dict]) -> np.ndarray:
     """Isotonic fit of the share within 0.05 per mass bin (empty bins take their
-    neighbours'), one fit per group of bins (``score_split``: the supported vertices',
-    then the others')."""
+    neighbours'), one fit per group of bins (``score_split``: one per bin of the map's
+    local distortion, in turn)."""
     count, within = histogram(rows)
     bins = rows[0]["reliability"].get("bins", len(count))
     return np.concatenate([_isotonic(count[g : g + bins], within[g : g + bins]) for g in range(0, len(count), bins)])

@@ -128,10 +128,16 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     per_sample = conf[r.source_point_vertex]
     assert abs(per_sample.mean() - chosen.mass) < 0.1
     # without a chosen map, symmetry_map.npy is the extraction's map of the same symmetry
-    plain = dataclasses.replace(r, zoomout_map=None).save(tmp_path / "plain")
+    # a stored local distortion belongs to the chosen map: marked high, the extraction's
+    # map still takes the first table
+    high = np.ones(len(spot.vertices), dtype=np.float32)
+    without = dataclasses.replace(r, zoomout_map=None, map_distortion=high)
+    plain = without.save(tmp_path / "plain")
     g = r.extraction.symmetries[r.extraction.global_index]
     cells = vertex_maps.vertex_map(g, r.support.vertex_source, r.target_point_vertex, len(r.marginals))
     assert np.array_equal(np.load(plain / "symmetry_map.npy"), cells)
+    first_table = np.where(cells >= 0, confidence.calibrated(without.symmetry_score()), 0)
+    assert np.allclose(np.load(plain / "symmetry_confidence.npy"), first_table, atol=1e-6)
     assert intrinsym.Result.load(plain).zoomout_map is None
 
 

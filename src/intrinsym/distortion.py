@@ -186,18 +186,13 @@ def local_distortion_on_graph(
     if len(mapped) == 0:
         return out
     seeds = np.sort(mapped[farthest_point_sampling(np.asarray(points)[mapped], spacing=spacing, seed=0)])
-    arrays = csr_arrays(graph)
-    rows, ys, d = ball_pairs(arrays, seeds, radius)
+    rows, ys, d = ball_pairs(csr_arrays(graph), seeds, radius)
     keep = (image[ys] >= 0) & (ys != seeds[rows])
     rows, ys, d = rows[keep], ys[keep], d[keep]
-    # d(T x, T y) from the balls about the images, looked up by sorted (row, vertex) keys
-    i_rows, i_cols, i_d = ball_pairs(arrays, image[seeds], radius + clip)
-    keys = i_rows * n + i_cols
-    order = np.argsort(keys, kind="stable")
-    keys, i_d = keys[order], i_d[order]
-    query = rows * n + image[ys]
-    at = np.minimum(np.searchsorted(keys, query), len(keys) - 1)
-    d_image = np.where(keys[at] == query, i_d[at], radius + clip)
+    # d(T x, T y) up to radius + clip: a pair beyond changes by at least clip
+    beyond = radius + clip
+    pairs = np.column_stack([image[seeds[rows]], image[ys]])
+    d_image = np.minimum(geodesics.pair_distances(graph, pairs, beyond), beyond)
     change = np.minimum(np.abs(d_image - d), clip)
     count = np.bincount(rows, minlength=len(seeds))
     total = np.bincount(rows, weights=change, minlength=len(seeds))

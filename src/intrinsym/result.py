@@ -218,7 +218,9 @@ class Result:
         (``symmetry_confidence.npy``): :meth:`symmetry_score` through
         :func:`intrinsym.confidence.calibrated`, by the map's local distortion
         (:attr:`map_distortion`); 0 where the map gives no image."""
-        conf = calibrated(self.symmetry_score(mass), self.map_distortion)
+        # map_distortion is that of zoomout_map: without it, the map scored is another
+        local = self.map_distortion if self.zoomout_map is not None else None
+        conf = calibrated(self.symmetry_score(mass), local)
         return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
 
     def global_confidence(self) -> float | None:
