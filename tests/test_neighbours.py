@@ -90,3 +90,25 @@ def test_shapes_are_checked():
         neighbours.nearest_rows(np.ones((4, 3)), np.ones((5, 2)))
     with pytest.raises(ValueError, match="rows"):
         neighbours.nearest_rows(np.ones((4, 3)), np.empty((0, 3)))
+
+
+@pytest.mark.parametrize("parallel_queries", [1, 10**9])
+def test_one_index_serves_every_leading_column_count(parallel_queries, monkeypatch):
+    # ZoomOut searches the first k columns of one index for k = 3 .. 12; on threads
+    # (every block) and serially the same rows as a k-d tree of those columns
+    monkeypatch.setattr(neighbours, "PARALLEL_QUERIES", parallel_queries)
+    shape = shapes.star(arms=5, resolution=16)
+    basis = laplacian.eigenpairs(shape.vertices, shape.faces, 13)[1][:, 1:]
+    query = basis[shape.symmetries[0]] + 0.01 * np.random.default_rng(4).normal(size=basis.shape)
+    index = neighbours.row_index(basis, n_clusters=40)
+    for k in range(3, 13):
+        got = neighbours.nearest_rows(query[:, :k], index)
+        np.testing.assert_array_equal(got, _exact(query[:, :k], basis[:, :k]))
+
+
+def test_an_index_is_searched_in_at_most_its_columns():
+    index = neighbours.row_index(np.ones((5, 3)))
+    with pytest.raises(ValueError, match="k <= K"):
+        neighbours.nearest_rows(np.ones((4, 4)), index)
+    with pytest.raises(ValueError, match="rows"):
+        neighbours.row_index(np.empty((0, 3)))

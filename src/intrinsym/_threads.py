@@ -4,9 +4,11 @@ A kernel over independent rows that runs a few times per ``detect`` is compiled 
 serial ``nogil`` function of a row range ``[lo, hi)`` and run here on a thread pool,
 instead of as a ``prange`` loop: Numba's parallel transform costs 1-4 s of compilation
 per kernel on the first run after install (about 12 s over the descriptor, descent and
-BP kernels), and the threads reach the same speed. A kernel called thousands of times on
-short blocks (:func:`intrinsym.neighbours.nearest_rows`) keeps ``prange``: a GIL
-handoff per piece costs more there than the compilation.
+BP kernels), and the threads reach the same speed. On two cores a ``prange`` also costs
+at run time: its OpenMP workers spin after each loop and take the cores from the BLAS
+threads of the NumPy products around it. A kernel called thousands of times on short
+blocks runs serially below a size where the threads pay for their start
+(:data:`intrinsym.neighbours.PARALLEL_QUERIES`).
 """
 
 from __future__ import annotations

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import distortion, spectral
+from . import distortion, neighbours, spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
 from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, SMOOTH_POINTS, Params
@@ -159,11 +159,13 @@ def zoomout_map(
         device=device,
     )
     candidates = np.unique(surface.vertex_map)
+    # every fit has the same size: one search structure serves all their point maps
+    rows = neighbours.search_rows(evecs[candidates, 1 : len(fits[0]) + 1], device)
 
     def images_of(vertices: np.ndarray, C: np.ndarray) -> np.ndarray:
         """Input vertices -> input-vertex images under the functional map C."""
         points = surface.vertex_map[vertices]
-        return _input_images(surface, spectral.map_points(C, evecs, points, candidates, device=device))
+        return _input_images(surface, candidates[spectral.nearest_images(evecs[points, 1:], rows, C, device)])
 
     masses = [sample_mass(images_of(source_vertex, C)) for C in fits]
     plain_cell = masses[1] > masses[0]

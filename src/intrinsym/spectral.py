@@ -135,20 +135,22 @@ def sign_candidates(embedding: np.ndarray, n_candidates: int) -> tuple[np.ndarra
     return signs[best], residuals[best]
 
 
-def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, device: str = "cpu") -> np.ndarray:
+def nearest_images(
+    source: np.ndarray, target: np.ndarray | neighbours.RowIndex, C: np.ndarray, device: str = "cpu"
+) -> np.ndarray:
     """The point map of a functional map: each source row to the nearest target row.
 
     Parameters
     ----------
     source : (S, K) float array
         Basis (eigenfunctions) at the points being mapped, K >= k.
-    target : (T, K) float array
-        The same basis at the candidate images.
+    target : (T, K) float array, or neighbours.RowIndex
+        The same basis at the candidate images, or its index
+        (:func:`intrinsym.neighbours.row_index`, built once for several searches).
     C : (k, k) float array
         Functional map in the first k basis functions (``target[T(x), :k] ~ source[x, :k] C``).
     device : {"cpu", "gpu"}
-        Where the search runs: :func:`intrinsym.neighbours.nearest_rows`, or
-        :func:`intrinsym.neighbours.dense_nearest_rows` with CuPy; the same rows.
+        Where the search runs (:func:`intrinsym.neighbours.nearest_leading_rows`).
 
     Returns
     -------
@@ -156,18 +158,12 @@ def nearest_images(source: np.ndarray, target: np.ndarray, C: np.ndarray, device
         Row of ``target`` nearest to ``source[x, :k] C`` for every source row x (exact).
     """
     k = len(C)
-    query = np.asarray(source, dtype=np.float64)[:, :k] @ C
-    basis = np.asarray(target, dtype=np.float64)[:, :k]
-    if device == "gpu":
-        import cupy
-
-        return neighbours.dense_nearest_rows(query, basis, cupy)
-    return neighbours.nearest_rows(query, basis)
+    return neighbours.nearest_leading_rows(np.asarray(source, dtype=np.float64)[:, :k] @ C, target, device)
 
 
 def zoomout(
     source: np.ndarray,
-    target: np.ndarray,
+    target: np.ndarray | neighbours.RowIndex,
     images: np.ndarray,
     k_start: int,
     involution: bool = False,
@@ -189,8 +185,9 @@ def zoomout(
     source : (S, K) float array
         Basis (eigenfunctions, ascending eigenvalue, constant mode left out) at the
         points being mapped, S >= K.
-    target : (T, K) float array
-        The same basis at the candidate images.
+    target : (T, K) float array, or neighbours.RowIndex
+        The same basis at the candidate images, or its index
+        (:func:`intrinsym.neighbours.search_rows`); every level searches the one index.
     images : (S,) int array
         Initial image (row of ``target``) of every source row.
     k_start : int
@@ -209,13 +206,14 @@ def zoomout(
         Functional map of the last iteration.
     """
     src = np.asarray(source, dtype=np.float64)
-    tgt = np.asarray(target, dtype=np.float64)
+    rows = target if isinstance(target, neighbours.RowIndex) else neighbours.search_rows(target, device)
+    tgt = rows.basis if isinstance(rows, neighbours.RowIndex) else rows
     images = np.asarray(images, dtype=np.int64)
     if involution:
         for k in range(k_start, src.shape[1] + 1):
             a, b = src[:, :k], tgt[images, :k]
             C = np.linalg.lstsq(np.vstack([a, b]), np.vstack([b, a]), rcond=None)[0]
-            images = nearest_images(src, tgt, C, device)
+            images = nearest_images(src, rows, C, device)
         return images, C
     # source[:, :k] = Q[:, :k] R[:k, :k] for every k, and the leading block of the
     # triangular R^-1 is the inverse of R's: one QR serves all the levels
@@ -223,7 +221,7 @@ def zoomout(
     r_inv = solve_triangular(r, np.eye(len(r)))
     for k in range(k_start, src.shape[1] + 1):
         C = r_inv[:k, :k] @ (q[:, :k].T @ tgt[images, :k])
-        images = nearest_images(src, tgt, C, device)
+        images = nearest_images(src, rows, C, device)
     return images, C
 
 
@@ -497,7 +495,7 @@ def seeded_functional_maps(
         target_spread = _spread(np.asarray(target_vertices, dtype=np.float64), n_samples, n_targets, n_final)[0]
     C = seed_map(phi[source, :k_seed], psi[target, :k_seed], trim)[0]
     samples = phi[spread[:n_samples]]
-    targets = psi[target_spread]
+    targets = neighbours.search_rows(psi[target_spread], device)
     start = nearest_images(samples, targets, C, device)
     return [zoomout(samples, targets, start, k_seed, involution, device)[1] for involution in involutions]
 
