@@ -49,6 +49,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
+from threadpoolctl import threadpool_limits
 
 from . import laplacian, neighbours, sampling
 
@@ -497,7 +498,8 @@ def seeded_functional_maps(
     samples = phi[spread[:n_samples]]
     targets = neighbours.search_rows(psi[target_spread], device)
     start = nearest_images(samples, targets, C, device)
-    return [zoomout(samples, targets, start, k_seed, involution, device)[1] for involution in involutions]
+    with threadpool_limits(1, user_api="blas"):  # (500, k) products: OpenBLAS's threads only slow them
+        return [zoomout(samples, targets, start, k_seed, involution, device)[1] for involution in involutions]
 
 
 def seeded_symmetry(
