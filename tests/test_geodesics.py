@@ -14,6 +14,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from intrinsym.geodesics import (
     distances_from,
+    distances_to,
     local_distances,
     mesh_edges,
     pair_distances,
@@ -157,6 +158,20 @@ def test_pair_distances_and_limit_match_dense(small_sphere) -> None:
     inner = dense[:5] <= 0.2 * (1 - 1e-9)
     np.testing.assert_allclose(rows[inner], dense[:5][inner], rtol=1e-12)
     np.testing.assert_allclose(distances_from(g, pts[:5]), dense[:5], rtol=1e-12)
+
+
+def test_distances_to_points_match_dense_dijkstra(small_sphere) -> None:
+    """distances_to: SciPy's dense Dijkstra at the points within ``limit``, inf beyond."""
+    g, pts, dense = small_sphere
+    sources = np.arange(0, g.shape[0], 37)
+    ref = dijkstra(g, directed=True, indices=sources)[:, pts]
+    got = distances_to(g, sources, pts, 0.25)
+    inner = ref <= 0.25 * (1 - 1e-9)
+    np.testing.assert_allclose(got[inner], ref[inner], rtol=1e-12)
+    assert np.all(np.isinf(got[ref > 0.25 * (1 + 1e-9)]))
+    np.testing.assert_allclose(distances_to(g, sources, pts, np.inf), ref, rtol=1e-12)
+    with pytest.raises(ValueError, match="distinct"):
+        distances_to(g, sources, pts[[0, 0]], 0.25)
 
 
 def grid_strip(nx: int = 40, ny: int = 4) -> tuple[np.ndarray, np.ndarray]:

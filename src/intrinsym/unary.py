@@ -228,7 +228,7 @@ def term_distances(
 def near_targets(surface: Surface, points: np.ndarray, pt: np.ndarray, radius: float) -> np.ndarray:
     """(len(points), T) geodesic distances from working vertices to the targets, inf
     beyond ``radius``."""
-    return geodesics.distances_from(surface.graph, points, limit=radius)[:, pt]
+    return geodesics.distances_to(surface.graph, points, pt, radius)
 
 
 def nearest_targets(dist: np.ndarray, k: int) -> np.ndarray:
