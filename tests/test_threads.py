@@ -58,9 +58,9 @@ def _on_threads(n: int, fn):
 
 @pytest.mark.skipif(min(nb.config.NUMBA_NUM_THREADS, os.cpu_count() or 1) < 2, reason="needs two cores")
 def test_kernels_give_the_same_result_on_one_thread_and_on_two():
-    """The descriptor kernels, the BP sweep, the nearest-row search and the descent split
-    their rows over the threads; each row is computed alone, so the results agree bit for
-    bit."""
+    """The descriptor kernels, the BP sweep, the nearest-row search, the descent and the
+    chord pruning of the geodesic graph split their rows over the threads; each row is
+    computed alone, so the results agree bit for bit."""
     cloud = sphere_points(3000, seed=1)
     points = cloud[:200]
     rng = np.random.default_rng(0)
@@ -75,7 +75,8 @@ def test_kernels_give_the_same_result_on_one_thread_and_on_two():
         images = quantize(spin_images(points, points, cloud, 0.3, 8))
         marginals = belief_propagation(mrf, schedule="colour", iterations=4, tol=0.0, dtype=np.float32).marginals
         descent = spectral_descent(graph, np.arange(len(vertices)), start, evecs)
-        return images, nmi(images, images), nearest_rows(query, basis), marginals, descent
+        chords = geodesics.surface_graph(vertices, faces)
+        return images, nmi(images, images), nearest_rows(query, basis), marginals, descent, chords.indices, chords.data
 
     one, two = _on_threads(1, run), _on_threads(2, run)
     for a, b in zip(one, two, strict=True):

@@ -187,13 +187,17 @@ def _ring_pairs(adj_ptr: np.ndarray, adj_idx: np.ndarray, rings: int) -> np.ndar
 
 @nb.njit(cache=True, nogil=True)
 def _keep_chords(
+    lo: int,
+    hi: int,
     vertices: np.ndarray,
     ptr: np.ndarray,
     idx: np.ndarray,
     is_base: np.ndarray,
     tol: float,
-) -> np.ndarray:
-    """Which candidate edges to keep: base edges, and chords no 2-path nearly matches.
+    keep: np.ndarray,
+) -> None:  # pragma: no cover
+    """Which candidate edges of the vertices ``lo:hi`` to keep, into ``keep``: base
+    edges, and chords no 2-path nearly matches.
 
     A chord (u, w) is dropped when some common neighbour x has
     ``|ux| + |xw| <= (1 + tol) |uw|``: x lies almost on the segment, so the chord would
@@ -201,20 +205,19 @@ def _keep_chords(
 
     Parameters
     ----------
+    lo, hi : int
+        The vertices whose rows are decided.
     vertices : (N, 3) float64
     ptr, idx : symmetric CSR pattern of all candidate edges, (N+1,), (E,) int64
     is_base : (E,) bool
         Entries that are kept unconditionally.
     tol : float
-
-    Returns
-    -------
-    (E,) bool
+    keep : (E,) bool
+        Receives the decision of every entry of the rows ``lo:hi``.
     """
     n = len(ptr) - 1
     len_u = np.full(n, np.inf)
-    keep = np.empty(len(idx), dtype=np.bool_)
-    for u in range(n):
+    for u in range(lo, hi):
         for e in range(ptr[u], ptr[u + 1]):
             w = idx[e]
             len_u[w] = np.sqrt(
@@ -242,7 +245,6 @@ def _keep_chords(
                         break
         for e in range(ptr[u], ptr[u + 1]):
             len_u[idx[e]] = np.inf
-    return keep
 
 
 def surface_graph(
@@ -330,7 +332,8 @@ def surface_graph(
     pattern = _symmetric_csr(n, cand, flag)
     ptr = pattern.indptr.astype(np.int64)
     idx = pattern.indices.astype(np.int64)
-    keep = _keep_chords(v, ptr, idx, pattern.data == 2.0, float(tol))
+    keep = np.empty(len(idx), dtype=np.bool_)
+    map_ranges(_keep_chords, n, v, ptr, idx, pattern.data == 2.0, float(tol), keep)
     rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr))[keep]
     cols = idx[keep]
     g = sp.csr_matrix((np.linalg.norm(v[rows] - v[cols], axis=1), (rows, cols)), shape=(n, n))
