@@ -71,3 +71,14 @@ def test_stages_never_import_front_ends():
 def test_no_module_is_a_god_module():
     long = {p.name: n for p in SRC.rglob("*.py") if (n := len(p.read_text().splitlines())) > MAX_LINES}
     assert not long, f"modules over {MAX_LINES} lines: {long}"
+
+
+def test_the_cli_starts_without_the_optional_heavy_imports():
+    # trimesh (PLY / STL, subdivision, ICP) and matplotlib (figures) cost 0.2-0.4 s each
+    # to import: a detect on an OFF / OBJ mesh that needs neither does not pay for them
+    import subprocess
+    import sys
+
+    code = "import sys, intrinsym.cli, intrinsym.pipeline; print(sorted({'trimesh', 'matplotlib'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

@@ -38,7 +38,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-import trimesh.registration
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
@@ -127,6 +126,8 @@ def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.nda
     best: tuple[np.ndarray, np.ndarray] | None = None
     for normal in np.linalg.svd(x, full_matrices=False)[2]:
         reflected = x - 2.0 * np.outer(x @ normal, normal)
+        import trimesh.registration
+
         _, moved, _ = trimesh.registration.icp(reflected, x, max_iterations=iterations, reflection=False, scale=False)
         residual, sym = tree.query(moved)
         if best is None or np.median(residual) < np.median(best[1]):

@@ -287,9 +287,10 @@ class RunInfo:
 
 def versions() -> dict[str, str]:
     """Versions of intrinsym, Python and the numerical libraries."""
+    import importlib.metadata
+
     import numba
     import scipy
-    import trimesh
 
     from ._version import __version__
 
@@ -299,5 +300,5 @@ def versions() -> dict[str, str]:
         "numpy": np.__version__,
         "scipy": scipy.__version__,
         "numba": numba.__version__,
-        "trimesh": trimesh.__version__,
+        "trimesh": importlib.metadata.version("trimesh"),
     }
