@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -55,9 +56,14 @@ class Surface:
         """Normalised coordinates -> the input file's coordinates."""
         return points * self.scale + self.center
 
+    @cached_property
+    def _input_tree(self) -> cKDTree:
+        # built once: a detect asks for nearest input vertices nine times
+        return cKDTree(self.input_vertices)
+
     def nearest_input_vertex(self, points: np.ndarray) -> np.ndarray:
         """Index of the input vertex nearest each normalised point, (n,) int64."""
-        _, idx = cKDTree(self.input_vertices).query(self.to_input(points))
+        _, idx = self._input_tree.query(self.to_input(points))
         return idx.astype(np.int64)
 
 
