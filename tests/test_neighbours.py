@@ -108,6 +108,8 @@ def test_one_index_serves_every_leading_column_count(parallel_queries, monkeypat
 
 def test_an_index_is_searched_in_at_most_its_columns():
     index = neighbours.row_index(np.ones((5, 3)))
+    assert neighbours.search_rows(index) is index
+    assert neighbours.search_rows(index, "gpu") is index.basis
     with pytest.raises(ValueError, match="k <= K"):
         neighbours.nearest_rows(np.ones((4, 4)), index)
     with pytest.raises(ValueError, match="rows"):

@@ -123,11 +123,11 @@ def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.nda
     x = np.asarray(vertices, dtype=np.float64)
     x = x - x.mean(axis=0)
     tree = cKDTree(x)
+    import trimesh.registration  # here, not at the top: importing trimesh costs 0.2 s
+
     best: tuple[np.ndarray, np.ndarray] | None = None
     for normal in np.linalg.svd(x, full_matrices=False)[2]:
         reflected = x - 2.0 * np.outer(x @ normal, normal)
-        import trimesh.registration
-
         _, moved, _ = trimesh.registration.icp(reflected, x, max_iterations=iterations, reflection=False, scale=False)
         residual, sym = tree.query(moved)
         if best is None or np.median(residual) < np.median(best[1]):

@@ -160,12 +160,13 @@ def zoomout_map(
     )
     candidates = np.unique(surface.vertex_map)
     # every fit has the same size: one search structure serves all their point maps
-    rows = neighbours.search_rows(evecs[candidates, 1 : len(fits[0]) + 1], device)
+    k = len(fits[0])
+    rows = neighbours.search_rows(evecs[candidates, 1 : k + 1], device)
 
     def images_of(vertices: np.ndarray, C: np.ndarray) -> np.ndarray:
         """Input vertices -> input-vertex images under the functional map C."""
         points = surface.vertex_map[vertices]
-        return _input_images(surface, candidates[spectral.nearest_images(evecs[points, 1:], rows, C, device)])
+        return _input_images(surface, candidates[spectral.nearest_images(evecs[points, 1 : k + 1], rows, C, device)])
 
     masses = [sample_mass(images_of(source_vertex, C)) for C in fits]
     plain_cell = masses[1] > masses[0]

@@ -21,8 +21,6 @@ import logging
 import os
 import stat
 import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import numpy as np
 
@@ -201,17 +199,18 @@ def _trimesh_arrays(loaded, label: str, kind: str) -> tuple[np.ndarray, np.ndarr
     raise InputError(f"{label}: the {kind} file holds no triangle mesh or point cloud")
 
 
-@contextmanager
-def _quiet_trimesh() -> Iterator[None]:
-    """Silence trimesh's log (it prints tracebacks for recoverable problems) and its
-    numeric warnings on corrupt values (checked after reading) while reading."""
+def _trimesh_load(path: str, file_type: str) -> object:
+    """``trimesh.load`` without processing, its log (it prints tracebacks for recoverable
+    problems) and its numeric warnings on corrupt values (checked after reading) silenced."""
+    import trimesh
+
     logger = logging.getLogger("trimesh")
     previous = logger.level
     logger.setLevel(logging.CRITICAL)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            yield
+            return trimesh.load(path, file_type=file_type, process=False)
     finally:
         logger.setLevel(previous)
 
@@ -220,10 +219,7 @@ def _read_ply(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     """Read a PLY file (ASCII or binary) with trimesh; no faces means a point cloud."""
     fmt, counts, header_lines = _ply_header(path, label)
     try:
-        import trimesh
-
-        with _quiet_trimesh():
-            loaded = trimesh.load(path, file_type="ply", process=False)
+        loaded = _trimesh_load(path, "ply")
     except Exception as err:  # trimesh raises many types on malformed input
         ascii_start = header_lines if fmt == "ascii" else None
         raise _trimesh_failure(path, label, "PLY", err, ascii_start) from None
@@ -261,10 +257,7 @@ def _read_stl(path: str, label: str, size: int) -> tuple[np.ndarray, np.ndarray]
         )
         raise InputError(f"{label}: truncated or corrupt binary STL file: {detail}")
     try:
-        import trimesh
-
-        with _quiet_trimesh():
-            loaded = trimesh.load(path, file_type="stl", process=False)
+        loaded = _trimesh_load(path, "stl")
     except Exception as err:  # trimesh raises many types on malformed input
         raise _trimesh_failure(path, label, "STL", err, None if is_binary else 0, "vertex") from None
     vertices, faces = _trimesh_arrays(loaded, label, "STL")

@@ -283,9 +283,12 @@ def nearest_rows(query: np.ndarray, basis: np.ndarray | RowIndex, n_clusters: in
     return nearest
 
 
-def search_rows(rows: np.ndarray, device: str = "cpu") -> np.ndarray | RowIndex:
+def search_rows(rows: np.ndarray | RowIndex, device: str = "cpu") -> np.ndarray | RowIndex:
     """``rows`` (T, K) as they are best searched many times on ``device``: their index on
-    the CPU (:func:`row_index`), the float64 array on a GPU (:func:`dense_nearest_rows`)."""
+    the CPU (:func:`row_index`; an index as it is), the float64 array on a GPU
+    (:func:`dense_nearest_rows`)."""
+    if isinstance(rows, RowIndex):
+        return rows if device == "cpu" else rows.basis
     return row_index(rows) if device == "cpu" else np.asarray(rows, dtype=np.float64)
 
 

@@ -204,10 +204,10 @@ def subdivide_to(vertices: np.ndarray, faces: np.ndarray, min_vertices: int) -> 
         return v, f
     if len(f) == 0:
         raise ValueError("cannot subdivide a mesh without faces")
+    import trimesh.remesh  # here, not at the top: importing trimesh costs 0.2 s
+
     while len(v) < min_vertices:
         n_before = len(v)
-        import trimesh.remesh  # here, not at the top: importing trimesh costs 0.2 s
-
         v_new, f_new = trimesh.remesh.subdivide(v, f)
         v_new = np.asarray(v_new, dtype=np.float64)
         f_new = np.asarray(f_new, dtype=np.int64)

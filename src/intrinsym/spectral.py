@@ -207,7 +207,7 @@ def zoomout(
         Functional map of the last iteration.
     """
     src = np.asarray(source, dtype=np.float64)
-    rows = target if isinstance(target, neighbours.RowIndex) else neighbours.search_rows(target, device)
+    rows = neighbours.search_rows(target, device)
     tgt = rows.basis if isinstance(rows, neighbours.RowIndex) else rows
     images = np.asarray(images, dtype=np.int64)
     if involution:
