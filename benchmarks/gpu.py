@@ -2,7 +2,7 @@
 
 For every mesh, runs :func:`intrinsym.detect` at the given sizes to build its MRF (the
 unary BP ran on, the source graph, the target rings), then runs BP on that one MRF with
-the colour schedule (the default) and the flooding schedule, each on the CPU and on the
+the colour schedule (the default on the GPU) and the flooding schedule, each on the CPU and on the
 GPU (:mod:`intrinsym.bp.gpu`), each to convergence, and prints seconds per iteration
 (median), iterations, seconds to convergence, and how far the GPU's marginals lie from
 the CPU's of the same schedule (the same messages: largest relative difference, and the

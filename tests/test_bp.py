@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from intrinsym import params
-from intrinsym.bp import BACKENDS, SCHEDULES, belief_propagation, belief_propagation_dense, resolve_backend
+from intrinsym.bp import (
+    BACKENDS,
+    SCHEDULES,
+    belief_propagation,
+    belief_propagation_dense,
+    resolve_backend,
+    resolve_schedule,
+)
 from intrinsym.bp.cpu import weight_polynomial
 from intrinsym.bp.gpu import available as gpu_available
 from intrinsym.bp.schedule import (
@@ -116,6 +123,21 @@ def test_residual_schedule_matches_oracle_and_saves_updates():
     assert sum(sparse.updates) < sum(colour.updates)
     # the same fixed point, up to the tolerance
     assert np.abs(sparse.marginals - colour.marginals).max() < 1e-4 * sparse.marginals.max()
+
+
+def test_auto_schedule_is_residual_on_the_cpu_and_colour_on_the_gpu():
+    assert resolve_schedule("auto", "cpu") == "residual"
+    assert resolve_schedule("auto", "gpu") == "colour"
+    for schedule in SCHEDULES[1:]:
+        assert resolve_schedule(schedule, "cpu") == resolve_schedule(schedule, "gpu") == schedule
+    mrf, _ = sphere_problem(40, 300, 4, seed=300)
+    kw = dict(iterations=60, tol=1e-3, seed=3, backend="cpu")
+    auto = belief_propagation(mrf, **kw)
+    residual = belief_propagation(mrf, schedule="residual", **kw)
+    colour = belief_propagation(mrf, schedule="colour", **kw)
+    assert auto.schedule == residual.schedule == "residual" and colour.schedule == "colour"
+    assert auto.updates == residual.updates and np.array_equal(auto.marginals, residual.marginals)
+    assert sum(auto.updates) < sum(colour.updates)
 
 
 def test_active_steps_keeps_the_sends_of_active_nodes():
@@ -262,7 +284,7 @@ def test_defaults_equal_params_defaults():
     """Called without a schedule or backend, BP runs as the pipeline does by default."""
     defaults = inspect.signature(belief_propagation).parameters
     p = params.Params()
-    assert defaults["schedule"].default == p.schedule == "colour"
+    assert defaults["schedule"].default == p.schedule == "auto"
     assert defaults["backend"].default == p.backend == "auto"
     assert defaults["iterations"].default == p.iterations
     assert set(typing.get_args(params.Schedule)) == set(SCHEDULES)

@@ -150,7 +150,10 @@ def test_deterministic_for_a_seed(spot, spot_result):
 
 def test_residual_schedule_end_to_end(spot, spot_result):
     res = intrinsym.detect(spot, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
-    colour = intrinsym.detect(spot, intrinsym.make_params(**dict(SMALL, iterations=100)))
+    colour = intrinsym.detect(spot, intrinsym.make_params(schedule="colour", **dict(SMALL, iterations=100)))
+    assert (res.info.bp.schedule, colour.info.bp.schedule) == ("residual", "colour")
+    # the default: the residual schedule on the CPU, the colour schedule on a GPU
+    assert spot_result.info.bp.schedule == bp.resolve_schedule("auto", spot_result.info.bp.backend)
     assert res.info.bp.converged and colour.info.bp.converged
     assert res.info.bp.message_updates < colour.info.bp.message_updates
     assert np.abs(res.marginals - colour.marginals).max() < 1e-3 * colour.marginals.max()

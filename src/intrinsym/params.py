@@ -18,7 +18,7 @@ from typing import Any, Literal, get_args, get_origin
 from .errors import ParameterError
 from .extract import ExtractParams
 
-Schedule = Literal["colour", "serial", "residual", "flooding"]
+Schedule = Literal["auto", "colour", "serial", "residual", "flooding"]
 Backend = Literal["auto", "cpu", "gpu"]
 DType = Literal["float32", "float64"]
 Potential = Literal["calibrated", "paper"]
@@ -196,10 +196,11 @@ class Params:
         flag="--lambda",
     )
     schedule: Schedule = _p(
-        "colour",
+        "auto",
         "BP message schedule: 'colour', serial sweeps whose independent updates run "
         "as one batch; 'serial', node by node (the paper's); 'residual', 'colour' in "
-        "which a node sends only while its inputs change; 'flooding', all at once",
+        "which a node sends only while its inputs change; 'flooding', all at once; "
+        "'auto', 'residual' on the CPU and 'colour' on the GPU",
         "bp",
         paper="serial",
     )

@@ -296,6 +296,7 @@ def _bp_stats(runs: list[bp.BPResult]) -> BPStats:
     res = runs[0]
     return BPStats(
         backend=res.backend,
+        schedule=res.schedule,
         iterations=res.iterations,
         converged=res.converged,
         max_change=res.max_change,

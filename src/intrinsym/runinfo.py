@@ -113,6 +113,9 @@ class BPStats:
     seconds_per_iteration, setup_seconds : float
     message_updates : int
     passes : tuple of PassStats
+    schedule : str
+        The schedule that ran ("auto" resolved; empty in a run.json written before
+        it was recorded).
     """
 
     backend: str
@@ -124,6 +127,7 @@ class BPStats:
     setup_seconds: float
     message_updates: int
     passes: tuple[PassStats, ...] = ()
+    schedule: str = ""
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@
 (:mod:`.dense`) is the paper-literal O(|Pt|^2) message in NumPy, the test oracle. All
 three share the schedules and the message layout of :mod:`.schedule` and the result,
 normalisation and stopping rule of :mod:`.common`, and every iteration updates every
-directed edge exactly once.
+directed edge exactly once (but in the residual schedule, which skips settled nodes).
 
 Modules import one way: ``schedule`` <- ``common`` <- ``cpu``, ``gpu``, ``dense`` <- this
 package.
@@ -31,6 +31,7 @@ from .schedule import (
     active_steps,
     colour_classes,
     incoming_edges,
+    resolve_schedule,
     ring_bounds,
     schedule_steps,
     serial_orders,
@@ -59,6 +60,7 @@ __all__ = [
     "initial_messages",
     "iterate",
     "resolve_backend",
+    "resolve_schedule",
     "ring_bounds",
     "run_schedule",
     "schedule_steps",
@@ -105,7 +107,7 @@ def resolve_backend(backend: str, schedule: str, dtype: type = np.float32) -> st
 
 def belief_propagation(
     mrf: MRF,
-    schedule: str = "colour",
+    schedule: str = "auto",
     iterations: int = 100,
     tol: float = 1e-4,
     damping: float = 0.0,
@@ -122,7 +124,8 @@ def belief_propagation(
     mrf : MRF
         The model. ``mrf.targets.radius`` must be at least
         ``mrf.edge_length.max() + mrf.delta``, else the message would not be exact.
-    schedule : {"colour", "serial", "residual", "flooding"}
+    schedule : {"auto", "colour", "serial", "residual", "flooding"}
+        "auto": "residual" on the CPU, "colour" on the GPU (:func:`resolve_schedule`).
         "colour": a serial schedule that visits the classes of a graph colouring
         (:func:`colour_classes`) in turn; every node of a class sends to all its
         neighbours at once. "serial": the paper's forward and backward sweeps, index

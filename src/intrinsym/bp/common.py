@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .schedule import SCHEDULES, Steps, active_steps, incoming_edges, schedule_steps, visiting_orders
+from .schedule import SCHEDULES, Steps, active_steps, incoming_edges, resolve_schedule, schedule_steps, visiting_orders
 
 #: ``sweep(read, write, steps, moved)``: updates the messages of ``steps`` read from
 #: ``read`` (2E, T) into ``write``, stores the largest change of every message sent in
@@ -46,6 +46,9 @@ class BPResult:
         Messages computed in every iteration (2E, except in the residual schedule).
     backend : {"cpu", "gpu"}
         Where BP ran.
+    schedule : str
+        The schedule that ran ("auto" resolved by
+        :func:`~intrinsym.bp.schedule.resolve_schedule`).
     """
 
     marginals: np.ndarray
@@ -57,6 +60,7 @@ class BPResult:
     setup_seconds: float = 0.0
     updates: list[int] = field(default_factory=list)
     backend: str = "cpu"
+    schedule: str = "colour"
 
 
 def check_arguments(unary: np.ndarray, schedule: str, iterations: int, damping: float) -> None:
@@ -167,6 +171,7 @@ def run_schedule(
     -------
     BPResult
     """
+    schedule = resolve_schedule(schedule, "cpu")
     n_s, n_t = unary.shape
     ptr, directed = incoming_edges(edges, n_s)
     messages = initial_messages(initial, len(edges), n_t, dtype)
@@ -208,4 +213,4 @@ def run_schedule(
     setup = time.perf_counter() - started
     history, seconds, converged = iterate(update, iterations, tol, progress)
     marg: np.ndarray = beliefs(unary, messages, ptr, directed).astype(dtype)
-    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, updates)
+    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, updates, "cpu", schedule)

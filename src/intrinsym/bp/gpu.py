@@ -19,7 +19,15 @@ import numpy as np
 
 from ..model import MRF
 from .common import BPResult, initial_messages, iterate
-from .schedule import GPU_SCHEDULES, Steps, incoming_edges, ring_bounds, schedule_steps, visiting_orders
+from .schedule import (
+    GPU_SCHEDULES,
+    Steps,
+    incoming_edges,
+    resolve_schedule,
+    ring_bounds,
+    schedule_steps,
+    visiting_orders,
+)
 
 _RING_MESSAGE = r"""
 extern "C" __global__ void ring_message(
@@ -79,6 +87,7 @@ def belief_propagation_gpu(
 
     if schedule not in GPU_SCHEDULES:
         raise ValueError(f"the GPU backend runs the schedules {GPU_SCHEDULES}, not {schedule!r}")
+    schedule = resolve_schedule(schedule, "gpu")
     started = time.perf_counter()
     n_s, n_t = mrf.unary.shape
     edges = np.asarray(mrf.edges, dtype=np.int64)
@@ -154,5 +163,5 @@ def belief_propagation_gpu(
     b = unary * cp.prod(messages[inc_gpu].astype(cp.float64), axis=1)
     marg = cp.asnumpy((b / b.sum(axis=1, keepdims=True)).astype(cp.float32))
     return BPResult(
-        marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history), backend="gpu"
+        marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history), "gpu", schedule
     )

@@ -15,9 +15,35 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-SCHEDULES = ("serial", "colour", "residual", "flooding")
+#: "auto" is :func:`resolve_schedule`'s choice for the backend that runs.
+SCHEDULES = ("auto", "serial", "colour", "residual", "flooding")
 #: Schedules the GPU backend runs ("residual" decides at run time which nodes send).
-GPU_SCHEDULES = ("serial", "colour", "flooding")
+GPU_SCHEDULES = ("auto", "serial", "colour", "flooding")
+
+
+def resolve_schedule(schedule: str, backend: str) -> str:
+    """The schedule that runs: ``schedule``, or for "auto" the fastest on ``backend``.
+
+    On the CPU, "auto" is "residual": once most nodes' inputs have settled it skips
+    their messages, which the "colour" schedule would recompute unchanged (at the
+    default ``bp_tol`` about a fifth of the updates at 250 / 4000 samples, half at the
+    paper's elephant size). On the GPU it is "colour", whose batches each run in one
+    kernel launch whatever the number of messages.
+
+    Parameters
+    ----------
+    schedule : str
+        One of :data:`SCHEDULES`.
+    backend : {"cpu", "gpu"}
+
+    Returns
+    -------
+    str
+        One of :data:`SCHEDULES` other than "auto".
+    """
+    if schedule != "auto":
+        return schedule
+    return "colour" if backend == "gpu" else "residual"
 
 
 def incoming_edges(edges: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
