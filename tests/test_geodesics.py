@@ -111,6 +111,55 @@ def test_point_cloud_knn_graph_error() -> None:
         assert (d[m] / true[m]).min() > 0.999
 
 
+def reference_surface_graph(v: np.ndarray, f: np.ndarray, rings: int, tol: float) -> sp.csr_matrix:
+    """surface_graph from its definition, pair by pair: mesh edges and shortcut chords
+    always, other pairs within ``rings`` hops unless a common candidate neighbour lies
+    within ``tol`` of the segment."""
+    n = len(v)
+    edges = mesh_edges(f)
+    adjacency = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    hops = dijkstra(adjacency, directed=False, unweighted=True, limit=rings)
+    base = set(map(tuple, edges.tolist()))
+    faces_of: dict[tuple[int, int], list[int]] = {}
+    for a, b, c in f.tolist():
+        for x, y, z in ((a, b, c), (b, c, a), (c, a, b)):
+            faces_of.setdefault((min(x, y), max(x, y)), []).append(z)
+    for opposite in faces_of.values():
+        for i in range(len(opposite) - 1):
+            base.add((min(opposite[i], opposite[i + 1]), max(opposite[i], opposite[i + 1])))
+    cand = [set(np.flatnonzero(np.isfinite(hops[u])).tolist()) - {u} for u in range(n)]
+    for u, w in base:
+        cand[u].add(w)
+        cand[w].add(u)
+    rows, cols = [], []
+    for u in range(n):
+        for w in sorted(cand[u]):
+            if (min(u, w), max(u, w)) not in base:
+                bound = (1 + tol) * np.linalg.norm(v[u] - v[w])
+                common = (cand[u] & cand[w]) - {u, w}
+                if any(np.linalg.norm(v[u] - v[x]) + np.linalg.norm(v[x] - v[w]) <= bound for x in common):
+                    continue
+            rows.append(u)
+            cols.append(w)
+    lengths = np.linalg.norm(v[rows] - v[cols], axis=1)
+    return sp.csr_matrix((lengths, (rows, cols)), shape=(n, n))
+
+
+@pytest.mark.parametrize("rings", [1, 2, 3])
+def test_surface_graph_matches_its_definition(rings: int) -> None:
+    """The threaded candidate rows and chord pruning give the graph the definition gives,
+    on a bumpy sphere (pruning decides both ways) and an open strip (boundary edges)."""
+    v, f, _ = unit_sphere(subdivisions=2)
+    v = v * (1 + 0.1 * np.sin(5 * v[:, :1]) * np.cos(3 * v[:, 1:2]))
+    strip_v, strip_f, _ = open_cylinder(nt=12, nz=5)
+    for vertices, faces in ((v, f), (strip_v, strip_f)):
+        got = surface_graph(vertices, faces, rings=rings)
+        want = reference_surface_graph(vertices, faces, rings, 0.01)
+        assert got.has_sorted_indices
+        assert np.array_equal(got.indptr, want.indptr) and np.array_equal(got.indices, want.indices)
+        assert np.allclose(got.data, want.data, rtol=0, atol=1e-15)
+
+
 @pytest.fixture(scope="module")
 def small_sphere() -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
     """Graph of a 642-vertex unit-area sphere, 150 FPS points, and dense Dijkstra among them."""

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
+from ._chords import candidate_rows, keep_chords
 from ._dijkstra import balls, csr_arrays, pair_block, symmetrize_rows
 from ._threads import map_ranges
 from .shape import Shape, clean, surface_area
@@ -136,117 +136,6 @@ def _symmetric_csr(n: int, pairs: np.ndarray, weights: np.ndarray) -> sp.csr_mat
     return g
 
 
-@nb.njit(cache=True, nogil=True)
-def _ring_pairs(adj_ptr: np.ndarray, adj_idx: np.ndarray, rings: int) -> np.ndarray:
-    """All vertex pairs (u, w), u < w, at most ``rings`` edge hops apart.
-
-    Parameters
-    ----------
-    adj_ptr, adj_idx : CSR adjacency of the mesh edges, (N+1,), (2M,) int64
-    rings : int
-
-    Returns
-    -------
-    (K, 2) int64
-    """
-    n = len(adj_ptr) - 1
-    depth = np.full(n, -1, dtype=np.int64)
-    queue = np.empty(n, dtype=np.int64)
-    out = np.empty((max(16, 16 * n), 2), dtype=np.int64)
-    k = 0
-    for u in range(n):
-        depth[u] = 0
-        queue[0] = u
-        head = 0
-        tail = 1
-        while head < tail:
-            v = queue[head]
-            head += 1
-            if depth[v] == rings:
-                continue
-            for e in range(adj_ptr[v], adj_ptr[v + 1]):
-                w = adj_idx[e]
-                if depth[w] < 0:
-                    depth[w] = depth[v] + 1
-                    queue[tail] = w
-                    tail += 1
-                    if w > u:
-                        if k == len(out):
-                            grown = np.empty((2 * len(out), 2), dtype=np.int64)
-                            for i in range(k):  # a loop: slice assignment compiles slowly
-                                grown[i, 0] = out[i, 0]
-                                grown[i, 1] = out[i, 1]
-                            out = grown
-                        out[k, 0] = u
-                        out[k, 1] = w
-                        k += 1
-        for t in range(tail):
-            depth[queue[t]] = -1
-    return out[:k]
-
-
-@nb.njit(cache=True, nogil=True)
-def _keep_chords(
-    lo: int,
-    hi: int,
-    vertices: np.ndarray,
-    ptr: np.ndarray,
-    idx: np.ndarray,
-    is_base: np.ndarray,
-    tol: float,
-    keep: np.ndarray,
-) -> None:  # pragma: no cover
-    """Which candidate edges of the vertices ``lo:hi`` to keep, into ``keep``: base
-    edges, and chords no 2-path nearly matches.
-
-    A chord (u, w) is dropped when some common neighbour x has
-    ``|ux| + |xw| <= (1 + tol) |uw|``: x lies almost on the segment, so the chord would
-    shorten no path by more than ``tol``. The test is symmetric in u and w.
-
-    Parameters
-    ----------
-    lo, hi : int
-        The vertices whose rows are decided.
-    vertices : (N, 3) float64
-    ptr, idx : symmetric CSR pattern of all candidate edges, (N+1,), (E,) int64
-    is_base : (E,) bool
-        Entries that are kept unconditionally.
-    tol : float
-    keep : (E,) bool
-        Receives the decision of every entry of the rows ``lo:hi``.
-    """
-    n = len(ptr) - 1
-    len_u = np.full(n, np.inf)
-    for u in range(lo, hi):
-        for e in range(ptr[u], ptr[u + 1]):
-            w = idx[e]
-            len_u[w] = np.sqrt(
-                (vertices[u, 0] - vertices[w, 0]) ** 2
-                + (vertices[u, 1] - vertices[w, 1]) ** 2
-                + (vertices[u, 2] - vertices[w, 2]) ** 2
-            )
-        for e in range(ptr[u], ptr[u + 1]):
-            if is_base[e]:
-                keep[e] = True
-                continue
-            w = idx[e]
-            bound = (1.0 + tol) * len_u[w]
-            keep[e] = True
-            for f in range(ptr[w], ptr[w + 1]):
-                x = idx[f]
-                if x != u and len_u[x] < bound:
-                    via = len_u[x] + np.sqrt(
-                        (vertices[x, 0] - vertices[w, 0]) ** 2
-                        + (vertices[x, 1] - vertices[w, 1]) ** 2
-                        + (vertices[x, 2] - vertices[w, 2]) ** 2
-                    )
-                    if via <= bound:
-                        keep[e] = False
-                        break
-        for e in range(ptr[u], ptr[u + 1]):
-            len_u[idx[e]] = np.inf
-
-
 def surface_graph(
     vertices: np.ndarray,
     faces: np.ndarray | None,
@@ -322,23 +211,28 @@ def surface_graph(
     if len(base) == 0:
         return sp.csr_matrix((n, n), dtype=np.float64)
     adj = _symmetric_csr(n, edges, np.ones(len(edges)))
-    ring = _ring_pairs(adj.indptr.astype(np.int64), adj.indices.astype(np.int64), rings)
-    cand = _unique_pairs(np.concatenate([base, ring]))
-    # flag 2 marks base edges (always kept), 1 the optional chords; keys are sorted
-    base_key = base[:, 0] * n + base[:, 1]
-    cand_key = cand[:, 0] * n + cand[:, 1]
-    pos = np.minimum(np.searchsorted(base_key, cand_key), len(base_key) - 1)
-    flag = 1.0 + (base_key[pos] == cand_key)
-    pattern = _symmetric_csr(n, cand, flag)
-    ptr = pattern.indptr.astype(np.int64)
-    idx = pattern.indices.astype(np.int64)
+    base_csr = _symmetric_csr(n, base, np.ones(len(base)))
+    # rows of the symmetric candidate pattern, each sorted, built on the worker threads
+    rows_of = (
+        adj.indptr.astype(np.int64),
+        adj.indices.astype(np.int64),
+        base_csr.indptr.astype(np.int64),
+        base_csr.indices.astype(np.int64),
+        rings,
+    )
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    map_ranges(candidate_rows, n, *rows_of, False, ptr, ptr[:0], np.empty(0, np.bool_))
+    np.cumsum(ptr, out=ptr)
+    idx = np.empty(ptr[-1], dtype=np.int64)
+    is_base = np.empty(ptr[-1], dtype=np.bool_)
+    map_ranges(candidate_rows, n, *rows_of, True, ptr, idx, is_base)
     keep = np.empty(len(idx), dtype=np.bool_)
-    map_ranges(_keep_chords, n, v, ptr, idx, pattern.data == 2.0, float(tol), keep)
-    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(ptr))[keep]
+    map_ranges(keep_chords, n, v, ptr, idx, is_base, float(tol), keep)
+    kept_ptr = np.concatenate([[0], np.cumsum(keep)])[ptr]
     cols = idx[keep]
-    g = sp.csr_matrix((np.linalg.norm(v[rows] - v[cols], axis=1), (rows, cols)), shape=(n, n))
-    g.sort_indices()
-    return g
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(kept_ptr))
+    lengths = np.linalg.norm(v[rows] - v[cols], axis=1)
+    return sp.csr_matrix((lengths, cols, kept_ptr), shape=(n, n))
 
 
 # --------------------------------------------------------------------------- public
