@@ -39,7 +39,7 @@ import scipy.sparse as sp
 
 from ._dijkstra import ball_pairs, csr_arrays
 from ._threads import map_ranges
-from .geodesics import distances_from, pair_distances
+from .geodesics import distances_to, pair_distances
 from .reflection import reversed_turns
 
 __all__ = ["agreeing_anchors", "consistent_anchors", "spectral_descent", "trilaterate"]
@@ -193,9 +193,11 @@ def consistent_anchors(
         return keep
     good = np.flatnonzero(keep)
     horizon = reach + 2.0 * agree
-    source = distances_from(graph, samples[doubt], reach)[:, samples[good]]
-    image = np.minimum(distances_from(graph, np.concatenate([anchors[doubt], images[doubt]]), horizon), horizon)
-    image = image[:, anchors[good]]
+    source = distances_to(graph, samples[doubt], samples[good], reach)
+    # two samples may share an anchor: the distances to each distinct one, then spread
+    targets, spread = np.unique(anchors[good], return_inverse=True)
+    ends = np.concatenate([anchors[doubt], images[doubt]])
+    image = np.minimum(distances_to(graph, ends, targets, horizon), horizon)[:, spread]
     for row, s in enumerate(doubt):
         near = np.flatnonzero(np.isfinite(source[row]))
         near = near[np.argsort(source[row, near], kind="stable")[:k]]
