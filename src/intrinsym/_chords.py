@@ -84,16 +84,24 @@ def candidate_rows(
     queue = np.empty(n, dtype=np.int64)
     for u in range(lo, hi):
         tail = _candidates(u, adj_ptr, adj_idx, base_ptr, base_idx, rings, depth, queue)
-        row = np.sort(queue[1:tail]) if fill else queue[:0]
         for t in range(tail):
             depth[queue[t]] = -1
         if not fill:
             ptr[u + 1] = tail - 1
             continue
+        # an insertion sort: rows hold a few dozen vertices, and np.sort would add a
+        # second to the first run's compilation
+        row = idx[ptr[u] : ptr[u + 1]]
+        for i in range(tail - 1):
+            w = queue[i + 1]
+            j = i
+            while j > 0 and row[j - 1] > w:
+                row[j] = row[j - 1]
+                j -= 1
+            row[j] = w
         for e in range(base_ptr[u], base_ptr[u + 1]):
             depth[base_idx[e]] = 0
         for i in range(len(row)):
-            idx[ptr[u] + i] = row[i]
             is_base[ptr[u] + i] = depth[row[i]] == 0
         for e in range(base_ptr[u], base_ptr[u + 1]):
             depth[base_idx[e]] = -1
