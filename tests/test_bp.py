@@ -309,13 +309,16 @@ def test_backend_choice():
         resolve_backend("tpu", "serial")
     assert resolve_backend("auto", "residual") == "cpu"
     assert resolve_backend("auto", "colour", np.float64) == "cpu"
+    assert resolve_backend("auto", "auto", np.float64) == "cpu"
     if gpu_available():
         assert resolve_backend("auto", "colour") == "gpu"
         assert resolve_backend("auto", "serial") == "gpu"
+        # the default schedule keeps the default backend on the GPU (as colour)
+        assert resolve_backend("auto", "auto") == resolve_backend("gpu", "auto") == "gpu"
         with pytest.raises(ValueError, match="residual"):
             resolve_backend("gpu", "residual")
     else:
-        assert resolve_backend("auto", "colour") == "cpu"
+        assert resolve_backend("auto", "colour") == resolve_backend("auto", "auto") == "cpu"
         with pytest.raises(ValueError, match="CuPy"):
             resolve_backend("gpu", "flooding")
 
