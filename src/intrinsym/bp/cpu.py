@@ -152,18 +152,20 @@ def _normalise(lo, hi, n_b, outs, by_length, rho2, damping, ht, ring, hsum, colm
         for f in range(n_t):
             for c in range(c_lo, c_hi):
                 hsum[c] += ht[f, c]
-        for f in range(n_t):
-            for c in range(c_lo, c_hi):
-                v = ring[f, c] + rho2 * hsum[c]
-                ring[f, c] = v
-                colmax[c] = max(colmax[c], v)
+                colmax[c] = max(colmax[c], ring[f, c])
+        # rounding is monotonic, so the largest of ring + rho^2 sum(h) is the largest
+        # ring sum plus rho^2 sum(h), bit for bit
+        for c in range(c_lo, c_hi):
+            colmax[c] = colmax[c] + rho2 * hsum[c]
         for c in range(c_lo, c_hi):
             out = outs[by_length[c]]
             m = colmax[c]
             mc = 0.0
             for f in range(n_t):
                 old = write[out, f]
-                v = (1.0 - damping) * (ring[f, c] / m) + damping * old
+                # the sum stored in the ring's precision, as a write back to it would be
+                total = ring.dtype.type(ring[f, c] + rho2 * hsum[c])
+                v = (1.0 - damping) * (total / m) + damping * old
                 write[out, f] = v
                 mc = max(mc, abs(v - old))
             moved[out] = mc
