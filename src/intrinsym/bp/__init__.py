@@ -5,7 +5,7 @@
 (:mod:`.dense`) is the paper-literal O(|Pt|^2) message in NumPy, the test oracle. All
 three share the schedules and the message layout of :mod:`.schedule` and the result,
 normalisation and stopping rule of :mod:`.common`, and every iteration updates every
-directed edge exactly once (but in the residual schedule, which skips settled nodes).
+directed edge exactly once (the residual schedule skips the nodes whose inputs have settled).
 
 Modules import one way: ``schedule`` <- ``common`` <- ``cpu``, ``gpu``, ``dense`` <- this
 package.
