@@ -88,3 +88,43 @@ def test_two_grid_rejects_a_coarse_size_out_of_range():
         two_grid_eigenpairs(v, f, 16, 30)
     with pytest.raises(ValueError, match="coarse must"):
         two_grid_eigenpairs(v, f, 16, len(v))
+
+
+def _copies(v: np.ndarray, f: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """``k`` copies of a mesh side by side, far apart: ``k`` connected components."""
+    step = 3 * np.ptp(v, axis=0).max()
+    return np.vstack([v + [step * i, 0, 0] for i in range(k)]), np.vstack([f + len(v) * i for i in range(k)])
+
+
+def _union_spectrum(evals: np.ndarray, copies: int, k: int) -> np.ndarray:
+    """The k smallest eigenvalues of ``copies`` copies of a connected shape whose own are
+    ``evals``, with one constant mode: each non-zero one repeated ``copies`` times."""
+    return np.concatenate([[0.0], np.repeat(evals[1:], copies)])[:k]
+
+
+@pytest.mark.parametrize("copies", [2, 3])
+def test_several_components_give_one_constant_and_the_union_of_the_spectra(copies):
+    # the spectrum of a disjoint union is the union of the spectra: each component's
+    # non-constant eigenvalues, and its constant functions left out but one
+    g = shapes.figure(10)
+    one = eigenpairs(g.vertices, g.faces, 12)[0]
+    v, f = _copies(g.vertices, g.faces, copies)
+    evals, evecs = eigenpairs(v, f, 12)
+    np.testing.assert_allclose(evals, _union_spectrum(one, copies, 12), rtol=1e-8, atol=1e-10)
+    stiffness, mass = laplacian.laplace_beltrami(v, f)
+    np.testing.assert_allclose(evecs.T @ mass @ evecs, np.eye(12), atol=1e-8)
+    np.testing.assert_allclose(stiffness @ evecs, (mass @ evecs) * evals, atol=1e-8)
+    np.testing.assert_allclose(evecs[:, 0], evecs[0, 0])  # the constant function, on every copy
+
+
+def test_two_grid_on_several_components_matches_the_direct_solve():
+    g = shapes.figure(30)
+    v, f = _copies(g.vertices, g.faces, 2)
+    k = 40
+    exact_vals, exact_vecs = eigenpairs(v, f, k)
+    vals, vecs = two_grid_eigenpairs(v, f, k, 6000)
+    mass = laplacian.laplace_beltrami(v, f)[1]
+    assert vals[0] == 0.0 and np.count_nonzero(vals == 0.0) == 1
+    np.testing.assert_allclose(vecs.T @ mass @ vecs, np.eye(k), atol=1e-8)
+    np.testing.assert_allclose(vals[1:], exact_vals[1:], rtol=1e-3)
+    assert _span_miss(exact_vecs[:, : k // 2], vecs, mass).max() < 1e-4

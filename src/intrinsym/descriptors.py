@@ -382,13 +382,15 @@ def nmi(qa: np.ndarray, qb: np.ndarray, levels: int = 8) -> np.ndarray:
 
 
 def constant_modes(evals: np.ndarray) -> int:
-    """The number of zero eigenvalues at the start of ``evals``: one per connected
-    component (its constant function), zero up to rounding (below 1e-8 of the largest).
+    """The number of zero eigenvalues at the start of ``evals``, zero up to rounding
+    (below 1e-8 of the largest): one per connected component (its constant function) in
+    a spectrum that keeps them all; 1 for :func:`intrinsym.laplacian.eigenpairs`, which
+    keeps one.
 
     Parameters
     ----------
     evals : (K,) float array
-        Ascending eigenvalues of :func:`intrinsym.laplacian.eigenpairs`.
+        Ascending eigenvalues.
 
     Returns
     -------

@@ -6,6 +6,13 @@ WKS / HKS unary terms and the seeded ZoomOut are built on. On a large mesh it so
 first on a decimated copy and carries the result back (:func:`two_grid_eigenpairs`):
 ARPACK's own work grows with the vertex count times its Lanczos basis (about 2k
 vectors) and dominates the direct solve on large meshes.
+
+A shape of several connected components has one zero eigenvalue per component (its
+indicator function). Both solvers leave all but one out: they solve in the complement of
+the indicators and put the constant function first, so the eigenfunctions are those of a
+connected shape, whatever the number of components (a scan's floating islands, the
+separate eyes and teeth of TOSCA's gorilla), and every consumer reads the non-trivial
+ones from column 1.
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from cholespy import CholeskySolverD, MatrixType
 from scipy.linalg import eigh
+from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import LinearOperator, eigsh
 from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
@@ -92,6 +100,33 @@ def _shifted_factor(stiffness: sp.csr_matrix, mass: sp.csr_matrix) -> tuple[Chol
     return factor, shift
 
 
+def _indicators(stiffness: sp.csr_matrix, mass: sp.csr_matrix) -> sp.csr_matrix | None:
+    """(N, C) M-orthonormal indicator functions of the C connected components of the
+    stiffness matrix's graph (the null space of ``L``), None for a connected shape."""
+    graph = stiffness.copy()
+    graph.eliminate_zeros()
+    n_components, label = connected_components(graph, directed=False)
+    if n_components == 1:
+        return None
+    area = np.bincount(label, weights=mass.diagonal(), minlength=n_components)
+    n = len(label)
+    return sp.csr_matrix((1.0 / np.sqrt(area[label]), (np.arange(n), label)), shape=(n, n_components))
+
+
+def _deflate(x: np.ndarray, indicators: sp.csr_matrix | None, mass: sp.csr_matrix) -> np.ndarray:
+    """``x`` (N,) or (N, m) without its components along the indicators (M-orthogonal
+    projection); ``x`` itself for a connected shape."""
+    if indicators is None:
+        return x
+    return x - indicators @ (indicators.T @ (mass @ x))
+
+
+def _with_constant(evals: np.ndarray, evecs: np.ndarray, mass: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+    """The M-normalised constant function (eigenvalue 0) put before deflated eigenpairs."""
+    constant = np.full((len(evecs), 1), 1.0 / np.sqrt(float(mass.sum())))
+    return np.concatenate([[0.0], evals]), np.hstack([constant, evecs])
+
+
 def _zero_constant_modes(evals: np.ndarray, area: float) -> np.ndarray:
     # the constant modes come out at +-1e-15: exactly zero far below the unit 1 / area
     return np.where(evals < 1e-8 / area, 0.0, evals)
@@ -137,17 +172,24 @@ def eigenpairs(
         return two_grid_eigenpairs(vertices, faces, k, coarse)
     stiffness, mass = laplace_beltrami(vertices, faces)
     factor, shift = _shifted_factor(stiffness, mass)
+    indicators = _indicators(stiffness, mass)
 
     def solve(b: np.ndarray) -> np.ndarray:
         x = np.empty(n)
         factor.solve(np.ascontiguousarray(b, dtype=np.float64).reshape(n), x)
-        return x
+        # the indicators are eigenvectors of the shifted inverse: their complement is
+        # invariant, and the deflated operator keeps ARPACK's M-symmetry
+        return _deflate(x, indicators, mass)
 
     inverse = LinearOperator((n, n), matvec=solve, dtype=np.float64)
-    v0 = np.random.default_rng(0).standard_normal(n)
-    evals, evecs = eigsh(stiffness, k=k, M=mass, sigma=shift, which="LM", v0=v0, OPinv=inverse)
+    v0 = _deflate(np.random.default_rng(0).standard_normal(n), indicators, mass)
+    wanted = k if indicators is None else k - 1
+    evals, evecs = eigsh(stiffness, k=wanted, M=mass, sigma=shift, which="LM", v0=v0, OPinv=inverse)
     order = np.argsort(evals)
-    return _zero_constant_modes(evals[order], float(mass.sum())), evecs[:, order]
+    evals, evecs = evals[order], evecs[:, order]
+    if indicators is not None:
+        evals, evecs = _with_constant(evals, evecs, mass)
+    return _zero_constant_modes(evals, float(mass.sum())), evecs
 
 
 def two_grid_eigenpairs(vertices: np.ndarray, faces: np.ndarray, k: int, coarse: int) -> tuple[np.ndarray, np.ndarray]:
@@ -188,21 +230,28 @@ def two_grid_eigenpairs(vertices: np.ndarray, faces: np.ndarray, k: int, coarse:
     coarse_v, coarse_f = fast_simplification.simplify(v, np.array(faces, dtype=np.int64), 1.0 - coarse / n)
     m = min(m, len(coarse_v) - 1)
     basis = eigenpairs(coarse_v, coarse_f, m)[1]
+    stiffness, mass = laplace_beltrami(v, faces)
+    indicators = _indicators(stiffness, mass)
+    if indicators is not None:
+        basis = basis[:, 1:]  # the coarse constant: the mesh's comes back below
     dist, near = cKDTree(coarse_v).query(v, k=_PROLONGATION_NEIGHBOURS)
     weight = 1.0 / np.maximum(dist, 1e-12) ** 2
     weight /= weight.sum(axis=1, keepdims=True)
     rows = np.arange(0, near.size + 1, _PROLONGATION_NEIGHBOURS)
     x = sp.csr_matrix((weight.ravel(), near.ravel(), rows), shape=(n, len(coarse_v))) @ basis
-    stiffness, mass = laplace_beltrami(v, faces)
     factor, _ = _shifted_factor(stiffness, mass)
     for _ in range(POLISH_STEPS):
         b = np.ascontiguousarray(mass @ x)
         x = np.empty_like(b)
         factor.solve(b, x)
+        x = _deflate(x, indicators, mass)
         reduced_l, reduced_m = x.T @ (stiffness @ x), x.T @ (mass @ x)
         # OpenBLAS's threads slow these down on two cores (michael1: 0.21 s -> 0.007 s for
         # the three eigh, 0.34 -> 0.17 s for the rotations)
         with threadpool_limits(1, user_api="blas"):
             evals, ritz = eigh((reduced_l + reduced_l.T) / 2, (reduced_m + reduced_m.T) / 2)
             x = x @ ritz
-    return _zero_constant_modes(evals[:k], float(mass.sum())), x[:, :k]
+    if indicators is None:
+        return _zero_constant_modes(evals[:k], float(mass.sum())), x[:, :k]
+    evals, evecs = _with_constant(evals[: k - 1], x[:, : k - 1], mass)
+    return _zero_constant_modes(evals, float(mass.sum())), evecs
