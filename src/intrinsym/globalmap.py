@@ -21,7 +21,11 @@ when they keep ``MAP_MARGIN`` more.
 The winner is then refined by geodesic trilateration to the marginals' sample images
 (:func:`refined_map`, :mod:`intrinsym.refine`) and smoothed by one projection onto the
 eigenfunctions (:func:`smoothed_map`, kept unless it keeps ``MAP_MARGIN`` less mass), and
-its kept mass is recorded as the global map's mass (``run.json``'s ``global_map``); its
+its kept mass is recorded as the global map's mass (``run.json``'s ``global_map``). On a
+shape of several connected components, those that hold fewer than ``CARRY_SAMPLES``
+source samples (a tooth or an eye modelled apart) then take the rigid motion of the
+surface around them
+(:func:`intrinsym.vertex_maps.carried_to_components`). The map's
 local distortion (:func:`local_map_distortion`) picks the confidence's calibration
 table. Only a run whose extraction found a
 global symmetry gets a global map: the spectral candidates replace a weak map, they
@@ -34,17 +38,27 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse.csgraph import connected_components
 
 from . import distortion, neighbours, spectral
 from .confidence import kept_mass, mass_within
 from .extract import Symmetry
-from .params import CELL_RADIUS, GUIDE_TOLERANCE, MAP_MARGIN, REFINE_REACH, REFINE_TOLERANCE, SMOOTH_POINTS, Params
+from .params import (
+    CARRY_SAMPLES,
+    CELL_RADIUS,
+    GUIDE_TOLERANCE,
+    MAP_MARGIN,
+    REFINE_REACH,
+    REFINE_TOLERANCE,
+    SMOOTH_POINTS,
+    Params,
+)
 from .refine import consistent_anchors, spectral_descent, trilaterate
 from .support import Support
 from .surface import Surface
-from .vertex_maps import fitted_vertex_map
+from .vertex_maps import carried_to_components, fitted_vertex_map
 
-__all__ = ["GlobalMap", "choose_global_map"]
+__all__ = ["GlobalMap", "carried_map", "choose_global_map"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +81,9 @@ class GlobalMap:
     smoothed : float
         Share of the input vertices whose image :func:`smoothed_map` then moved (0 when
         it was refused or not run).
+    carried : float
+        Share of the input vertices on connected components with fewer than
+        ``CARRY_SAMPLES`` source samples, whose image :func:`carried_map` gave.
     """
 
     vertex_map: np.ndarray
@@ -75,6 +92,7 @@ class GlobalMap:
     masses: dict[str, float]
     refined: float = 0.0
     smoothed: float = 0.0
+    carried: float = 0.0
 
 
 def _input_images(surface: Surface, image: np.ndarray) -> np.ndarray:
@@ -285,7 +303,36 @@ def choose_global_map(
         smoothed_mass = mass_of(smoothed)
         if smoothed_mass >= mass - MAP_MARGIN:
             final, mass = smoothed, smoothed_mass
-    return GlobalMap(final, mass, best, masses, float(np.mean(refined != vertex_map)), float(np.mean(final != refined)))
+    carried, loose = carried_map(surface, ps, final)
+    return GlobalMap(
+        carried,
+        mass,
+        best,
+        masses,
+        float(np.mean(refined != vertex_map)),
+        float(np.mean(final != refined)),
+        float(np.mean(loose)),
+    )
+
+
+def carried_map(surface: Surface, ps: np.ndarray, vertex_map: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The global map carried onto the connected components of the working shape that
+    hold fewer than ``CARRY_SAMPLES`` of the source samples ``ps``
+    (:func:`intrinsym.vertex_maps.carried_to_components`).
+
+    Returns
+    -------
+    vertex_map : (N_in,) int64
+    loose : (N_in,) bool
+        The input vertices on those components.
+    """
+    n_components, label = connected_components(surface.graph, directed=False)
+    component = label[surface.vertex_map]
+    held = np.bincount(label[ps], minlength=n_components)[component] >= CARRY_SAMPLES
+    if n_components == 1 or held.all():
+        return vertex_map, ~held
+    positions = surface.shape.vertices[surface.vertex_map]
+    return carried_to_components(positions, component, vertex_map, held), ~held
 
 
 def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) -> np.ndarray:

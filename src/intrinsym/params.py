@@ -53,6 +53,17 @@ REFINE_REACH = 0.3
 #: vertices per eigenfunction; a coarser input keeps its map
 #: (:func:`intrinsym.globalmap.smoothed_map`).
 SMOOTH_POINTS = 4
+#: A connected component with fewer source samples than this is carried by the rigid
+#: motion of the surface around it rather than mapped by the model: two sample pairs do
+#: not fix its orientation (:func:`intrinsym.globalmap.carried_map`).
+CARRY_SAMPLES = 3
+#: A carried component moves as the mapped vertices within this distance of it do
+#: (sqrt(area) units, beyond its own radius): about the default sample spacing, a patch
+#: around it curved enough to fix the motion
+#: (:func:`intrinsym.vertex_maps.carried_to_components`).
+CARRY_REACH = 0.05
+#: ... and at least this many of them (the nearest).
+CARRY_MIN = 20
 #: A mesh with fewer vertices than this many times the larger sample count is
 #: midpoint-subdivided (each round quadruples it) until it has that many: the working
 #: shape the samples, geodesics and descriptors live on (measured in docs/benchmarks.md).

@@ -388,7 +388,7 @@ def _solve(
         identity=outcome.identity,
         global_map=None
         if chosen is None
-        else GlobalMapStats(chosen.source, chosen.mass, chosen.masses, chosen.refined, chosen.smoothed),
+        else GlobalMapStats(chosen.source, chosen.mass, chosen.masses, chosen.refined, chosen.smoothed, chosen.carried),
         versions=versions(),
     )
     return Result(

@@ -194,6 +194,10 @@ class GlobalMapStats:
     smoothed : float
         Share of the input vertices whose image the spectral smoothing then moved
         (:func:`intrinsym.refine.spectral_descent`; 0 without it or where it was refused).
+    carried : float
+        Share of the input vertices on connected components with fewer than three
+        source samples, carried there by the rigid motion of the surface around them
+        (:func:`intrinsym.vertex_maps.carried_to_components`; 0 on a connected shape).
     """
 
     source: str
@@ -201,6 +205,7 @@ class GlobalMapStats:
     masses: dict[str, float] = field(default_factory=dict)
     refined: float = 0.0
     smoothed: float = 0.0
+    carried: float = 0.0
 
 
 @dataclass(frozen=True)

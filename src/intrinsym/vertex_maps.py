@@ -2,7 +2,8 @@
 
 :func:`vertex_map` gives each input vertex the image of the source sample whose
 geodesic Voronoi cell holds it; :func:`fitted_vertex_map` refines that by local linear
-fits (beyond the paper).
+fits (beyond the paper); :func:`carried_to_components` carries a dense map onto the
+connected components the model does not see.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .extract import ExtractParams, Symmetry
+from .params import CARRY_MIN, CARRY_REACH
 from .support import SourceGraph, Support
 
 
@@ -107,4 +109,73 @@ def fitted_vertex_map(
         candidates = np.sort(np.concatenate([target_order[target_bounds[j] : target_bounds[j + 1]] for j in nearby]))
         y = target_points[image[s]] + (support.source_mesh_vertices[cell] - source_points[s]) @ lin
         out[cell] = candidates[cKDTree(support.target_mesh_vertices[candidates]).query(y)[1]]
+    return out
+
+
+def carried_to_components(
+    positions: np.ndarray, component: np.ndarray, vertex_map: np.ndarray, held: np.ndarray
+) -> np.ndarray:
+    """A dense self-map carried onto the connected components the model does not see.
+
+    Such a component (a tooth or an eye modelled apart, a scan's floating island) holds
+    too few source samples for the marginals to say where it goes, and no geodesic
+    reaches it. It moves with the surface around it, so it takes the rigid motion (a
+    reflection allowed; least squares, Kabsch) that best carries the mapped vertices of
+    the held components near it onto their images: those within ``CARRY_REACH`` of it,
+    beyond its own radius, and at least ``CARRY_MIN``. It goes onto the one loose
+    component nearest its moved copy (the mean distance from each vertex of either to
+    the other: a tooth onto the mirror tooth, not onto the tooth beside it nor onto the
+    gum around it), each vertex to the vertex of that component nearest its moved
+    position.
+
+    Parameters
+    ----------
+    positions : (N, 3) float array
+        Vertex positions (sqrt(area) units).
+    component : (N,) int array
+        Connected component of every vertex, in 0..C-1.
+    vertex_map : (N,) int64
+        Image of every vertex, -1 for none.
+    held : (N,) bool
+        Vertices of the components whose map stays; the others are carried.
+
+    Returns
+    -------
+    (N,) int64
+        ``vertex_map`` with every vertex of a loose component re-mapped; unchanged when
+        every vertex is held, or fewer than four held vertices are mapped.
+    """
+    out = np.array(vertex_map, dtype=np.int64)
+    anchors = np.flatnonzero(held & (out >= 0))
+    if held.all() or len(anchors) < 4:
+        return out
+    anchor_tree = cKDTree(positions[anchors])
+    order, bounds = _members(np.where(held, -1, component), int(component.max()) + 1)
+    loose = [order[bounds[c] : bounds[c + 1]] for c in range(len(bounds) - 1) if bounds[c + 1] > bounds[c]]
+    centres = np.array([positions[m].mean(axis=0) for m in loose])
+    radii = np.array([np.linalg.norm(positions[m] - c, axis=1).max() for m, c in zip(loose, centres, strict=True)])
+    centre_tree = cKDTree(centres)
+    trees: dict[int, cKDTree] = {}
+    for members, centre, radius in zip(loose, centres, radii, strict=True):
+        near = anchor_tree.query_ball_point(centre, radius + CARRY_REACH)
+        if len(near) < CARRY_MIN:
+            near = anchor_tree.query(centre, k=min(CARRY_MIN, len(anchors)))[1]
+        x = positions[anchors[near]]
+        y = positions[out[anchors[near]]]
+        u, _, vt = np.linalg.svd((x - x.mean(axis=0)).T @ (y - y.mean(axis=0)))
+        moved = (positions[members] - x.mean(axis=0)) @ (u @ vt) + y.mean(axis=0)
+        # every loose component that could lie within reach of the moved one
+        middle = moved.mean(axis=0)
+        options = centre_tree.query_ball_point(middle, radius + radii.max() + CARRY_REACH)
+        options = options or [int(centre_tree.query(middle)[1])]
+        moved_tree = cKDTree(moved)
+        fits = []
+        for j in options:
+            if j not in trees:
+                trees[j] = cKDTree(positions[loose[j]])
+            # both ways: a tooth moved into a larger part lies near it, not the part near the tooth
+            forward = trees[j].query(moved)
+            fits.append((forward[0].mean() + moved_tree.query(positions[loose[j]])[0].mean(), forward[1]))
+        best = int(np.argmin([cost for cost, _ in fits]))
+        out[members] = loose[options[best]][fits[best][1]]
     return out

@@ -1,0 +1,72 @@
+"""A dense map carried onto the connected components the model does not see."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+import intrinsym
+from conftest import mirror_shape
+from intrinsym.vertex_maps import carried_to_components
+
+
+def _with_loose_parts() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The mirror-symmetric bent ellipsoid with four small spheres apart from it: two
+    mirror "eyes" above its surface, a tooth on the mirror plane, and a larger "gum"
+    beside the left eye.
+
+    Returns vertices, faces, the mirror image of every vertex (x -> -x, exact) and the
+    component of every vertex (0 the body, 1 / 2 the eyes, 3 the tooth, 4 the gum).
+    """
+    body, faces, body_sym = mirror_shape()
+    ball = trimesh.creation.icosphere(subdivisions=2)  # symmetric under x -> -x
+    bv, bf = np.asarray(ball.vertices), np.asarray(ball.faces)
+    top = body[np.argmax(body[:, 2] - 10 * np.abs(body[:, 0] - 0.25))]  # a point on top, right of the plane
+    parts = [(0.06, top * [1, 1, 1] + [0, 0, 0.1]), (0.06, top * [-1, 1, 1] + [0, 0, 0.1])]
+    parts += [(0.05, [0.0, top[1] + 0.3, top[2] + 0.1]), (0.15, top * [-1, 1, 1] + [-0.2, 0, 0.1])]
+    vertices, all_faces, sym, component = [body], [faces], [body_sym], [np.zeros(len(body), dtype=np.int64)]
+    n, ball_sym = len(body), cKDTree(bv).query(bv * [-1, 1, 1])[1]
+    starts = []
+    for i, (radius, centre) in enumerate(parts):
+        starts.append(n)
+        vertices.append(bv * radius + centre)
+        all_faces.append(bf + n)
+        component.append(np.full(len(bv), i + 1))
+        n += len(bv)
+    # the eyes swap, the tooth maps onto itself, the gum has no mirror part (itself)
+    eye_a, eye_b, tooth, gum = starts
+    sym += [ball_sym + eye_b, ball_sym + eye_a, ball_sym + tooth, np.arange(len(bv)) + gum]
+    return np.vstack(vertices), np.vstack(all_faces), np.concatenate(sym), np.concatenate(component)
+
+
+def test_loose_parts_take_the_mirror_of_the_surface_around_them():
+    v, _, sym, component = _with_loose_parts()
+    held = component == 0
+    start = np.where(held, sym, -1)
+    out = carried_to_components(v, component, start, held)
+    np.testing.assert_array_equal(out[held], sym[held])  # the held map stays
+    # the eyes swap vertex for vertex, the tooth maps onto its own mirror, not the gum beside
+    for part in (1, 2, 3):
+        np.testing.assert_array_equal(out[component == part], sym[component == part])
+
+
+def test_nothing_to_carry():
+    v, _, sym, component = _with_loose_parts()
+    everything = np.ones(len(v), dtype=bool)
+    np.testing.assert_array_equal(carried_to_components(v, component, sym, everything), sym)
+    # too few mapped vertices to fix a motion: unchanged
+    held = component == 0
+    few = np.full(len(v), -1)
+    few[:3] = sym[:3]
+    np.testing.assert_array_equal(carried_to_components(v, component, few, held), few)
+
+
+def test_detect_carries_the_global_map_onto_parts_without_samples():
+    v, f, sym, component = _with_loose_parts()
+    result = intrinsym.detect((v, f), n_source=60, n_target=600, seed=0)
+    image = result.symmetry_map()
+    assert result.info.global_map is not None and result.info.global_map.carried > 0
+    # each loose part lands on its mirror part (the eyes on each other, the tooth on itself)
+    for part in (1, 2, 3):
+        assert np.mean(component[image[component == part]] == component[sym[component == part]]) > 0.95
