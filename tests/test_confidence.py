@@ -86,3 +86,15 @@ def test_score_weighs_the_mass_by_the_round_trip():
     apart = np.array([0.0, r / 4, 0.0, np.nan])
     trip = np.array([r / 2, r / 4, np.nan, 2 * r])
     assert confidence.score(mass, apart, trip) == pytest.approx([0.4, 0.45, 0.8, 0.0])
+
+
+def test_carried_confidence_is_that_of_the_nearest_vertex_in_a_cell():
+    positions = np.array([[0.0, 0, 0], [1, 0, 0], [0.1, 0, 0], [0.9, 0, 0], [5, 0, 0]])
+    conf = np.array([0.9, 0.4, 0.0, 0.0, 0.0], dtype=np.float32)
+    owner = np.array([0, 1, -1, -1, -1])
+    np.testing.assert_array_equal(
+        confidence.carried_confidence(conf, owner, positions), np.array([0.9, 0.4, 0.9, 0.4, 0.4], dtype=np.float32)
+    )
+    # every vertex in a cell, or none: unchanged
+    np.testing.assert_array_equal(confidence.carried_confidence(conf, np.zeros(5, int), positions), conf)
+    np.testing.assert_array_equal(confidence.carried_confidence(conf, np.full(5, -1), positions), conf)

@@ -70,3 +70,9 @@ def test_detect_carries_the_global_map_onto_parts_without_samples():
     # each loose part lands on its mirror part (the eyes on each other, the tooth on itself)
     for part in (1, 2, 3):
         assert np.mean(component[image[component == part]] == component[sym[component == part]]) > 0.95
+    # a vertex no sample's cell reaches is as sure as the nearest vertex a cell holds
+    conf = result.symmetry_confidence()
+    seen = result.support.vertex_source >= 0
+    assert not seen.all()
+    nearest = cKDTree(v[seen]).query(v[~seen])[1]
+    np.testing.assert_array_equal(conf[~seen], conf[seen][nearest])

@@ -19,7 +19,7 @@ from typing import Any, ClassVar, cast
 import numpy as np
 
 from . import model, records
-from .confidence import calibrated, disagreement, map_mass, round_trip, score
+from .confidence import calibrated, carried_confidence, disagreement, map_mass, round_trip, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, save_npz, write_set
@@ -217,10 +217,15 @@ class Result:
         under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
         (``symmetry_confidence.npy``): :meth:`symmetry_score` through
         :func:`intrinsym.confidence.calibrated`, by the map's local distortion
-        (:attr:`map_distortion`); 0 where the map gives no image."""
+        (:attr:`map_distortion`); where no source sample's cell reaches (a connected
+        component without samples, carried there), that of the nearest vertex a cell
+        holds (:func:`intrinsym.confidence.carried_confidence`); 0 where the map gives
+        no image."""
         # map_distortion is that of zoomout_map: without it, the map scored is another
         local = self.map_distortion if self.zoomout_map is not None else None
         conf = calibrated(self.symmetry_score(mass), local)
+        if self.support is not None and self.support.source_mesh_vertices is not None:
+            conf = carried_confidence(conf, self.support.vertex_source, self.support.source_mesh_vertices)
         return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
 
     def global_confidence(self) -> float | None:
