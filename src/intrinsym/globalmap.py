@@ -24,12 +24,10 @@ eigenfunctions (:func:`smoothed_map`, kept unless it keeps ``MAP_MARGIN`` less m
 its kept mass is recorded as the global map's mass (``run.json``'s ``global_map``). On a
 shape of several connected components, those that hold fewer than ``CARRY_SAMPLES``
 source samples (a tooth or an eye modelled apart) then take the rigid motion of the
-surface around them
-(:func:`intrinsym.vertex_maps.carried_to_components`). The map's
-local distortion (:func:`local_map_distortion`) picks the confidence's calibration
-table. Only a run whose extraction found a
-global symmetry gets a global map: the spectral candidates replace a weak map, they
-never invent a global symmetry.
+surface around them (:func:`carried_map`). The map's local distortion
+(:func:`local_map_distortion`) picks the confidence's calibration table. Only a run
+whose extraction found a global symmetry gets a global map: the spectral candidates
+replace a weak map, they never invent a global symmetry.
 """
 
 from __future__ import annotations
