@@ -51,6 +51,25 @@ def test_loose_parts_take_the_mirror_of_the_surface_around_them():
         np.testing.assert_array_equal(out[component == part], sym[component == part])
 
 
+def test_a_loose_part_lands_on_its_mirror_when_that_one_is_held():
+    # the right eye holds samples (its map stays), the left one does not
+    v, _, sym, component = _with_loose_parts()
+    held = np.isin(component, [0, 2])
+    out = carried_to_components(v, component, np.where(held, sym, -1), held)
+    np.testing.assert_array_equal(out[component == 1], sym[component == 1])
+    np.testing.assert_array_equal(out[held], sym[held])
+
+
+def test_a_part_with_nothing_within_reach_gets_no_image():
+    v, _, sym, component = _with_loose_parts()
+    held = component == 0
+    far = v.copy()
+    far[component == 1] += [0.0, 0.0, 5.0]  # the left eye floats far above the body: no mirror part there
+    out = carried_to_components(far, component, np.where(held, sym, -1), held)
+    assert (out[component == 1] == -1).all()
+    np.testing.assert_array_equal(out[component == 3], sym[component == 3])
+
+
 def test_nothing_to_carry():
     v, _, sym, component = _with_loose_parts()
     everything = np.ones(len(v), dtype=bool)

@@ -122,18 +122,18 @@ def carried_to_components(
     reaches it. It moves with the surface around it, so it takes the rigid motion (a
     reflection allowed; least squares, Kabsch) that best carries the mapped vertices of
     the held components near it onto their images: those within ``CARRY_REACH`` of it,
-    beyond its own radius, and at least ``CARRY_MIN``. It goes onto the one loose
-    component nearest its moved copy (the mean distance from each vertex of either to
-    the other: a tooth onto the mirror tooth, not onto the tooth beside it nor onto the
-    gum around it), each vertex to the vertex of that component nearest its moved
-    position.
+    beyond its own radius, and at least ``CARRY_MIN``. It goes onto the component
+    nearest its moved copy (the mean distance from each vertex of either to the other: a
+    tooth onto the mirror tooth, not onto the tooth beside it nor onto the gum around
+    it) among those within reach but the ones that surface and its image lie on, each
+    vertex to the vertex of that component nearest its moved position.
 
     Parameters
     ----------
     positions : (N, 3) float array
         Vertex positions (sqrt(area) units).
     component : (N,) int array
-        Connected component of every vertex, in 0..C-1.
+        Connected component of every vertex.
     vertex_map : (N,) int64
         Image of every vertex, -1 for none.
     held : (N,) bool
@@ -142,40 +142,50 @@ def carried_to_components(
     Returns
     -------
     (N,) int64
-        ``vertex_map`` with every vertex of a loose component re-mapped; unchanged when
-        every vertex is held, or fewer than four held vertices are mapped.
+        ``vertex_map`` with every vertex of a carried component re-mapped (-1 where no
+        component lies within reach of its moved copy); unchanged when every vertex is
+        held, or fewer than four held vertices are mapped.
     """
     out = np.array(vertex_map, dtype=np.int64)
     anchors = np.flatnonzero(held & (out >= 0))
     if held.all() or len(anchors) < 4:
         return out
     anchor_tree = cKDTree(positions[anchors])
-    order, bounds = _members(np.where(held, -1, component), int(component.max()) + 1)
-    loose = [order[bounds[c] : bounds[c + 1]] for c in range(len(bounds) - 1) if bounds[c + 1] > bounds[c]]
-    centres = np.array([positions[m].mean(axis=0) for m in loose])
-    radii = np.array([np.linalg.norm(positions[m] - c, axis=1).max() for m, c in zip(loose, centres, strict=True)])
+    labels, label = np.unique(component, return_inverse=True)
+    order, bounds = _members(label.ravel(), len(labels))
+    parts = [order[bounds[i] : bounds[i + 1]] for i in range(len(labels))]
+    centres = np.array([positions[m].mean(axis=0) for m in parts])
+    radii = np.array([np.linalg.norm(positions[m] - c, axis=1).max() for m, c in zip(parts, centres, strict=True)])
     centre_tree = cKDTree(centres)
     trees: dict[int, cKDTree] = {}
-    for members, centre, radius in zip(loose, centres, radii, strict=True):
-        near = anchor_tree.query_ball_point(centre, radius + CARRY_REACH)
+    for i in np.unique(label[~held]):
+        members = parts[i]
+        near = anchor_tree.query_ball_point(centres[i], radii[i] + CARRY_REACH)
         if len(near) < CARRY_MIN:
-            near = anchor_tree.query(centre, k=min(CARRY_MIN, len(anchors)))[1]
+            near = anchor_tree.query(centres[i], k=min(CARRY_MIN, len(anchors)))[1]
         x = positions[anchors[near]]
         y = positions[out[anchors[near]]]
         u, _, vt = np.linalg.svd((x - x.mean(axis=0)).T @ (y - y.mean(axis=0)))
         moved = (positions[members] - x.mean(axis=0)) @ (u @ vt) + y.mean(axis=0)
-        # every loose component that could lie within reach of the moved one
+        # the components within reach of the moved one, but the surface that carries it
+        carrier = set(label[anchors[near]]) | set(label[out[anchors[near]]])
         middle = moved.mean(axis=0)
-        options = centre_tree.query_ball_point(middle, radius + radii.max() + CARRY_REACH)
-        options = options or [int(centre_tree.query(middle)[1])]
+        options = [
+            j
+            for j in centre_tree.query_ball_point(middle, radii[i] + radii.max() + CARRY_REACH)
+            if j not in carrier and np.linalg.norm(centres[j] - middle) <= radii[i] + radii[j] + CARRY_REACH
+        ]
+        if not options:
+            out[members] = -1
+            continue
         moved_tree = cKDTree(moved)
         fits = []
         for j in options:
             if j not in trees:
-                trees[j] = cKDTree(positions[loose[j]])
+                trees[j] = cKDTree(positions[parts[j]])
             # both ways: a tooth moved into a larger part lies near it, not the part near the tooth
             forward = trees[j].query(moved)
-            fits.append((forward[0].mean() + moved_tree.query(positions[loose[j]])[0].mean(), forward[1]))
+            fits.append((forward[0].mean() + moved_tree.query(positions[parts[j]])[0].mean(), forward[1]))
         best = int(np.argmin([cost for cost, _ in fits]))
-        out[members] = loose[options[best]][fits[best][1]]
+        out[members] = parts[options[best]][fits[best][1]]
     return out
