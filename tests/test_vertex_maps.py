@@ -8,6 +8,9 @@ from scipy.spatial import cKDTree
 
 import intrinsym
 from conftest import mirror_shape
+from intrinsym.globalmap import carried_map
+from intrinsym.shape import from_arrays
+from intrinsym.surface import prepare
 from intrinsym.vertex_maps import carried_to_components
 
 
@@ -79,6 +82,27 @@ def test_nothing_to_carry():
     few = np.full(len(v), -1)
     few[:3] = sym[:3]
     np.testing.assert_array_equal(carried_to_components(v, component, few, held), few)
+
+
+def test_carried_map_counts_only_what_it_carries():
+    v, f, sym, component = _with_loose_parts()
+    surface = prepare(from_arrays(v, f))
+    body = np.flatnonzero(component == 0)
+    start = np.where(component == 0, sym, -1)
+    # three samples on the body: the four small parts are carried onto their mirrors
+    out, loose = carried_map(surface, surface.vertex_map[body[:3]], start)
+    np.testing.assert_array_equal(loose, component > 0)
+    for part in (1, 2, 3):
+        np.testing.assert_array_equal(out[component == part], sym[component == part])
+    # two: no component holds enough samples to carry the others by
+    out, loose = carried_map(surface, surface.vertex_map[body[:2]], start)
+    assert not loose.any()
+    np.testing.assert_array_equal(out, start)
+    # a connected shape: nothing carried, whatever the samples
+    mv, mf, msym = mirror_shape()
+    out, loose = carried_map(prepare(from_arrays(mv, mf)), np.arange(2), msym)
+    assert not loose.any()
+    np.testing.assert_array_equal(out, msym)
 
 
 def test_detect_carries_the_global_map_onto_parts_without_samples():

@@ -322,13 +322,14 @@ def carried_map(surface: Surface, ps: np.ndarray, vertex_map: np.ndarray) -> tup
     -------
     vertex_map : (N_in,) int64
     loose : (N_in,) bool
-        The input vertices on those components.
+        The input vertices carried: none on a connected shape, or where no component
+        holds that many samples (nothing to carry them by).
     """
     n_components, label = connected_components(surface.graph, directed=False)
     component = label[surface.vertex_map]
     held = np.bincount(label[ps], minlength=n_components)[component] >= CARRY_SAMPLES
-    if n_components == 1 or held.all():
-        return vertex_map, ~held
+    if n_components == 1 or held.all() or not held.any():
+        return vertex_map, np.zeros(len(held), dtype=bool)
     positions = surface.shape.vertices[surface.vertex_map]
     return carried_to_components(positions, component, vertex_map, held), ~held
 

@@ -197,7 +197,8 @@ class GlobalMapStats:
     carried : float
         Share of the input vertices on connected components with fewer than three
         source samples, carried there by the rigid motion of the surface around them
-        (:func:`intrinsym.vertex_maps.carried_to_components`; 0 on a connected shape).
+        (:func:`intrinsym.vertex_maps.carried_to_components`; 0 on a connected shape, and
+        where no component holds three samples to carry the others by).
     """
 
     source: str
