@@ -44,9 +44,9 @@ COARSE_EXTRA = 20
 #: varies over about 1 / sqrt(120) of sqrt(area), which 40 vertices per pair resolve.
 COARSE_PER_PAIR = 40
 #: The two-grid solve is used on meshes of more than this many times the coarse size;
-#: below, it is barely faster than the direct solve (docs/benchmarks.md), so smaller
-#: meshes keep their exact eigenpairs.
-FINE_PER_COARSE = 5
+#: below, it gains little over the direct solve (0.8x on TOSCA's centaur, 15,768
+#: vertices; docs/benchmarks.md), so smaller meshes keep their exact eigenpairs.
+FINE_PER_COARSE = 2
 #: Inverse iterations on the fine mesh, each followed by a Rayleigh-Ritz projection:
 #: three bring the eigenvalues of TOSCA meshes within about 2e-3 of the direct solve's,
 #: which leaves BP's marginals unchanged (fewer moved the maps; docs/benchmarks.md).

@@ -17,6 +17,7 @@ from typing import Any, Literal, get_args, get_origin
 
 from .errors import ParameterError
 from .extract import ExtractParams
+from .laplacian import FINE_PER_COARSE
 
 Schedule = Literal["auto", "colour", "serial", "residual", "flooding"]
 Backend = Literal["auto", "cpu", "gpu"]
@@ -175,7 +176,7 @@ class Params:
     eigenpairs: int = _p(100, "Laplace-Beltrami eigenpairs of the WKS / HKS", "unary")
     eigen_coarse: int = _p(
         8000,
-        "vertices of the decimated copy a mesh of more than five times as many is first solved on for "
+        f"vertices of the decimated copy a mesh of more than {FINE_PER_COARSE} times as many is first solved on for "
         "the eigenpairs (then refined on the mesh itself: intrinsym.laplacian.two_grid_eigenpairs); "
         "0 solves on the mesh alone",
         "unary",
