@@ -108,6 +108,14 @@ def _split(v: np.ndarray, f: np.ndarray, rng: np.random.Generator) -> Mesh:
     return _compact(v, kept)
 
 
+def _wound(v: np.ndarray, f: np.ndarray, rng: np.random.Generator, share: float = 0.5) -> Mesh:
+    """Half the faces, drawn at random, wound the other way (an inconsistently oriented export)."""
+    turn = rng.random(len(f)) < share
+    out = f.copy()
+    out[turn] = out[turn][:, ::-1]
+    return v, out
+
+
 PERTURBATIONS: dict[str, tuple[str, Callable[..., Mesh] | None]] = {
     "clean": ("clean", None),
     "noise_0.1": ("normal noise 0.1 % of the diagonal", _noise(0.1)),
@@ -120,6 +128,7 @@ PERTURBATIONS: dict[str, tuple[str, Callable[..., Mesh] | None]] = {
     "holes": ("five holes (about 10 % of the faces)", _holes),
     "cloud": ("point cloud of 10,000 points", _cloud),
     "split": ("split into two components", _split),
+    "wound": ("half the faces wound the other way", _wound),
 }
 
 
@@ -182,26 +191,30 @@ def main(argv: list[str] | None = None) -> int:
     add_data_argument(parser)
     parser.add_argument("--shapes", nargs="+", default=["cat1", "michael1"])
     parser.add_argument("--only", nargs="+", choices=sorted(PERTURBATIONS), help="perturbations to run (default all)")
-    parser.add_argument("--cache", default="robustness_cache", help="folder of the cached rows")
+    parser.add_argument(
+        "--cache", help="folder of cached rows, reused when present (they are not keyed by the code: one per version)"
+    )
     parser.add_argument("--markdown", help="also write the table to this file")
     args = parser.parse_args(argv)
     data = data_folder(args.data)
     if data is None:
         print(no_data("robustness", args.data))
         return 0
-    cache = Path(args.cache)
-    cache.mkdir(parents=True, exist_ok=True)
+    cache = None if args.cache is None else Path(args.cache)
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
     rows = []
     for name in args.only or list(PERTURBATIONS):
         for shape in args.shapes:
             mesh = data / "tosca_sym" / f"{shape}.off"
             truth = data / "tosca_sym" / f"{shape.rstrip('0123456789')}.sym"
-            file = cache / f"{shape}_{name}.json"
-            if file.is_file():
+            file = None if cache is None else cache / f"{shape}_{name}.json"
+            if file is not None and file.is_file():
                 rows.append(json.loads(file.read_text()))
                 continue
             row = run_case(mesh, truth, name)
-            file.write_text(json.dumps(row, indent=2))
+            if file is not None:
+                file.write_text(json.dumps(row, indent=2))
             rows.append(row)
             print(json.dumps(row), flush=True)
     table = markdown(rows, args.shapes)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from conftest import PYRAMID_F, PYRAMID_V, sphere_points
+from conftest import PYRAMID_F, PYRAMID_V, mirror_shape, sphere_points
 from intrinsym.errors import InputError
-from intrinsym.shape import Shape, clean, from_arrays, surface_area, vertex_normals
+from intrinsym.shape import Shape, clean, from_arrays, orient_faces, surface_area, vertex_normals
 
 # ---------------------------------------------------------------------------
 # construction and validation
@@ -82,7 +82,7 @@ def test_clean_merges_and_drops_by_hand():
             [0, 1, 2],  # kept
             [0, 3, 1],  # kept
             [4, 2, 3],  # kept, becomes (0, 2, 3)
-            [1, 7, 3],  # kept, becomes (1, 2, 3)
+            [1, 7, 3],  # kept, becomes (1, 2, 3), wound as (3, 2, 1) like its neighbours
             [0, 0, 1],  # repeated index
             [0, 5, 1],  # zero area
             [2, 1, 0],  # duplicate of face 0 (reversed)
@@ -91,7 +91,7 @@ def test_clean_merges_and_drops_by_hand():
     )
     cleaned, vertex_map = clean(from_arrays(vertices, faces, "hand.off"))
     np.testing.assert_array_equal(cleaned.vertices, vertices[:4])
-    np.testing.assert_array_equal(cleaned.faces, [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 2, 3]])
+    np.testing.assert_array_equal(cleaned.faces, [[0, 1, 2], [0, 3, 1], [0, 2, 3], [3, 2, 1]])
     np.testing.assert_array_equal(vertex_map, [0, 1, 2, 3, 0, 0, 3, 2])
     assert vertex_map.dtype == np.int64
     assert cleaned.path == "hand.off"
@@ -109,6 +109,56 @@ def test_clean_keeps_components_and_clean_input_unchanged():
     np.testing.assert_array_equal(cleaned.vertices, both.vertices)
     np.testing.assert_array_equal(cleaned.faces, both.faces)
     np.testing.assert_array_equal(vertex_map, np.arange(len(both.vertices)))
+
+
+def _reversed(faces: np.ndarray, share: float, seed: int = 0) -> np.ndarray:
+    """``faces`` with a random ``share`` of them wound the other way."""
+    turn = np.random.default_rng(seed).random(len(faces)) < share
+    out = np.array(faces)
+    out[turn] = out[turn][:, ::-1]
+    return out
+
+
+def _consistent(vertices: np.ndarray, faces: np.ndarray) -> bool:
+    return bool(trimesh.Trimesh(vertices, faces, process=False).is_winding_consistent)
+
+
+def test_orient_faces_by_hand():
+    # two triangles on the edge 1-2: (0, 1, 2) runs it 1 -> 2, so the other must run 2 -> 1
+    np.testing.assert_array_equal(orient_faces(np.array([[0, 1, 2], [3, 1, 2]])), [[0, 1, 2], [2, 1, 3]])
+    consistent = np.array([[0, 1, 2], [2, 1, 3]])
+    assert orient_faces(consistent) is consistent
+
+
+@pytest.mark.parametrize("share", [0.1, 0.4])
+def test_orient_faces_restores_closed_and_open_meshes(share):
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    cap = f[(v[f][:, :, 2] > -0.3).all(axis=1)]  # open: a boundary loop
+    for faces in (f, cap):
+        mixed = _reversed(faces, share)
+        assert not _consistent(v, mixed)
+        oriented = orient_faces(mixed)
+        assert _consistent(v, oriented)  # trimesh's own check of every shared edge
+        np.testing.assert_array_equal(oriented, faces)  # the majority's winding: the original
+
+
+def test_orient_faces_each_part_keeps_its_majority():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    f = np.asarray(sphere.faces)
+    n = len(sphere.vertices)
+    faces = np.vstack([f[:, ::-1], _reversed(f, 0.3) + n])  # part 1 all inward, part 2 mostly outward
+    oriented = orient_faces(faces)
+    np.testing.assert_array_equal(oriented[: len(f)], f[:, ::-1])
+    np.testing.assert_array_equal(oriented[len(f) :], f + n)
+
+
+def test_clean_winds_faces_so_normals_come_back():
+    v, f, _ = mirror_shape()
+    cleaned, vertex_map = clean(from_arrays(v, _reversed(f, 0.3)))
+    np.testing.assert_array_equal(vertex_map, np.arange(len(v)))
+    np.testing.assert_array_equal(cleaned.faces, f)
+    np.testing.assert_allclose(vertex_normals(cleaned), vertex_normals(from_arrays(v, f)))
 
 
 def test_clean_point_cloud_merges_duplicates_only():
