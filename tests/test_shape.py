@@ -153,6 +153,20 @@ def test_orient_faces_each_part_keeps_its_majority():
     np.testing.assert_array_equal(oriented[len(f) :], f + n)
 
 
+def test_orient_faces_leaves_one_seam_on_a_moebius_strip_and_skips_non_manifold_edges():
+    n = 12
+    strip = []
+    for i in range(n):  # quads between two rails, the last one joined with a half twist
+        a, b = i, i + n
+        c, d = (i + 1, i + 1 + n) if i < n - 1 else (n, 0)
+        strip += [[a, b, c], [b, d, c]]
+    oriented = orient_faces(_reversed(np.array(strip), 0.5))
+    directed = np.stack([oriented.ravel(), oriented[:, [1, 2, 0]].ravel()], axis=1)
+    assert len(directed) - len(np.unique(directed, axis=0)) == 1  # one edge run twice the same way
+    book = np.array([[0, 1, 2], [0, 1, 3], [1, 0, 4]])  # three faces on the edge 0-1: no pair to agree
+    assert orient_faces(book) is book
+
+
 def test_clean_winds_faces_so_normals_come_back():
     v, f, _ = mirror_shape()
     cleaned, vertex_map = clean(from_arrays(v, _reversed(f, 0.3)))
