@@ -50,12 +50,22 @@ def test_the_exact_map_is_kept(mirror):
     np.testing.assert_array_equal(refined, sym)
 
 
-def test_a_vertex_without_its_k_anchors_within_reach_keeps_its_image(mirror):
+def test_a_vertex_with_fewer_than_k_anchors_within_reach_uses_those_it_has(mirror):
+    """At a reach of 0.08 (the 80 samples lie about 0.11 apart) a vertex has at most three
+    anchors, as at the tip of a limb: one to three still pull a slid image back onto the
+    mirror (from one, the descent stops on the circle about it nearest the start), none
+    leave it where it was."""
     surf, sym, ps = _surface(mirror)
     start = _slid(surf, sym, 0.06)
-    spacing = np.sqrt(1.0 / len(ps))  # the samples' spacing: a disc this wide holds about 3
-    refined = trilaterate(surf.graph, np.arange(len(sym)), start, ps, sym[ps], 20, 0.01, spacing)
-    np.testing.assert_array_equal(refined, start)
+    reach = 0.08
+    near = np.count_nonzero(geodesics.distances_from(surf.graph, ps) <= reach, axis=0)
+    assert near.max() <= 3 and np.count_nonzero(near == 0) > 10
+    refined = trilaterate(surf.graph, np.arange(len(sym)), start, ps, sym[ps], 20, 0.01, reach)
+    before, after = _errors(surf, start, sym), _errors(surf, refined, sym)
+    np.testing.assert_array_equal(refined[near == 0], start[near == 0])
+    assert np.median(before[near > 0]) > 0.05
+    assert after[near == 1].mean() < before[near == 1].mean() / 3
+    assert after[near >= 2].mean() < before[near >= 2].mean() / 10
     with pytest.raises(ValueError, match="differ in length"):
         trilaterate(surf.graph, np.arange(3), start[:2], ps, sym[ps], 20, 0.01, 0.4)
 

@@ -211,15 +211,15 @@ def consistent_anchors(
 
 
 @nb.njit(cache=True, nogil=True)
-def _descend(lo, hi, start, ptr, cols, targets, embedding, indptr, indices, need, tolerance2, out):  # pragma: no cover
+def _descend(lo, hi, start, ptr, cols, targets, embedding, indptr, indices, tolerance2, out):  # pragma: no cover
     """Steepest descent of the queries ``lo:hi`` over the graph's neighbours, from ``start[q]``, to a
     local minimum of ``sum_k (embedding[y, cols[k]] - targets[k])^2`` over k in
-    ``ptr[q]:ptr[q + 1]``; a query with fewer than ``need`` terms, or whose start costs at
-    most ``tolerance2`` per term, keeps its start. The images go to ``out``, which holds the starts."""
+    ``ptr[q]:ptr[q + 1]``; a query with no terms, or whose start costs at most
+    ``tolerance2`` per term, keeps its start. The images go to ``out``, which holds the starts."""
     for q in range(lo, hi):
         a0 = ptr[q]
         a1 = ptr[q + 1]
-        if a1 - a0 < need:
+        if a1 == a0:
             continue
         y = start[q]
         best = 0.0
@@ -255,12 +255,11 @@ def _descent(
     embedding: np.ndarray,
     indptr: np.ndarray,
     indices: np.ndarray,
-    need: int,
     tolerance2: float,
 ) -> np.ndarray:
     """:func:`_descend` of every query, over threads; returns the images."""
     out = start.copy()
-    map_ranges(_descend, len(start), start, ptr, cols, targets, embedding, indptr, indices, need, tolerance2, out)
+    map_ranges(_descend, len(start), start, ptr, cols, targets, embedding, indptr, indices, tolerance2, out)
     return out
 
 
@@ -292,8 +291,10 @@ def trilaterate(
         Working vertex of each sample's image.
     k : int
         Nearest samples (by graph geodesic) each query is trilaterated against; a query
-        with fewer within ``reach`` (an extremity such as a foot, whose anchors all lie
-        on one side and leave it free to turn about the limb) keeps its image.
+        with fewer within ``reach`` (an extremity such as a paw) uses those it has. The
+        descent starts from the current image and only moves downhill, so anchors that
+        all lie on one side correct the image along the limb without turning it about
+        the limb into the mirrored basin.
     tolerance : float
         A query whose current image keeps the distances to this root mean square residual
         keeps it (graph length units).
@@ -305,8 +306,8 @@ def trilaterate(
     Returns
     -------
     (n,) int64
-        Refined images; ``start`` where fewer than ``k`` samples are within ``reach`` or
-        the current image is within ``tolerance``.
+        Refined images; ``start`` where no sample is within ``reach`` or the current
+        image is within ``tolerance``.
     """
     queries = np.asarray(queries, dtype=np.int64)
     start = np.asarray(start, dtype=np.int64)
@@ -326,7 +327,7 @@ def trilaterate(
     image_distance = np.full((n, len(anchors)), 2.0 * horizon, dtype=np.float32)
     image_distance[cols, rows] = dists
     indptr, indices, _ = arrays
-    return _descent(start, ptr, sample, distance, image_distance, indptr, indices, k, tolerance**2)
+    return _descent(start, ptr, sample, distance, image_distance, indptr, indices, tolerance**2)
 
 
 def spectral_descent(graph: sp.spmatrix, points: np.ndarray, start: np.ndarray, evecs: np.ndarray) -> np.ndarray:
@@ -374,4 +375,4 @@ def spectral_descent(graph: sp.spmatrix, points: np.ndarray, start: np.ndarray, 
     # every point's cost runs over all k columns of the embedding
     ptr = np.arange(0, (n + 1) * k, k, dtype=np.int64)
     cols = np.tile(np.arange(k, dtype=np.int64), n)
-    return _descent(start, ptr, cols, (basis @ C).ravel(), embedding, indptr, indices, 0, -1.0)
+    return _descent(start, ptr, cols, (basis @ C).ravel(), embedding, indptr, indices, -1.0)
