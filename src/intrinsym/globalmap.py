@@ -397,8 +397,8 @@ def refined_map(
     ``p.trivial_radius`` of itself, and the argmax keeps the geodesic distances to those
     anchors better (:func:`intrinsym.refine.consistent_anchors`: a part the map flipped
     or slid); each vertex is trilaterated against its ``p.refine_anchors`` nearest
-    anchored samples, and keeps its image where that keeps the distances to within
-    ``tolerance`` target spacings.
+    anchored samples within ``REFINE_REACH`` (those there are, where fewer), and keeps its
+    image where that keeps the distances to within ``tolerance`` target spacings.
 
     Parameters
     ----------

@@ -321,8 +321,8 @@ class Params:
     refine_anchors: int = _p(
         20,
         "move each vertex's global-map image to where its geodesic distances to this many "
-        "nearest source samples are best kept from the samples' marginal peaks (geodesic "
-        "trilateration); 0: no refinement",
+        "nearest source samples (fewer at the tip of a limb: those within reach) are best kept "
+        "from the samples' marginal peaks (geodesic trilateration); 0: no refinement",
         "global map",
         paper="off",
         self_match=True,
