@@ -70,6 +70,37 @@ def test_a_vertex_with_fewer_than_k_anchors_within_reach_uses_those_it_has(mirro
         trilaterate(surf.graph, np.arange(3), start[:2], ps, sym[ps], 20, 0.01, 0.4)
 
 
+def test_a_tip_turned_about_the_long_axis_is_caught_by_its_nearest_anchor(mirror):
+    """The tip of the ellipsoid's long axis turned 40 degrees about that axis: the turn
+    keeps the distances to the anchors up the axis, so some tip vertices keep them within
+    the tolerance in the root mean square, but not the distance to their nearest anchor.
+    Those move, onto the mirror."""
+    surf, sym, ps = _surface(mirror)
+    v = surf.shape.vertices
+    tip = v[:, 1] > np.quantile(v[:, 1], 0.93)
+    axis = [v[tip, 0].mean(), 0.0, v[tip, 2].mean()]
+    angle = np.deg2rad(40.0)
+    turn = np.array([[np.cos(angle), 0.0, np.sin(angle)], [0.0, 1.0, 0.0], [-np.sin(angle), 0.0, np.cos(angle)]])
+    start = sym.copy()
+    start[tip] = sym[cKDTree(v).query((v[tip] - axis) @ turn.T + axis)[1]]
+    tolerance, reach = 0.05, 0.4
+    from_samples = geodesics.distances_from(surf.graph, ps)
+    from_anchors = geodesics.distances_from(surf.graph, sym[ps])
+    caught = []
+    for x in np.flatnonzero(tip):
+        inside = np.flatnonzero(from_samples[:, x] <= reach)
+        nearest = inside[np.argsort(from_samples[inside, x], kind="stable")[:20]]
+        residual = from_anchors[nearest, start[x]] - from_samples[nearest, x]
+        if np.sqrt(np.mean(residual**2)) <= tolerance < abs(residual[0]):
+            caught.append(x)
+    assert len(caught) >= 10
+    refined = trilaterate(surf.graph, np.arange(len(sym)), start, ps, sym[ps], 20, tolerance, reach)
+    before, after = _errors(surf, start, sym), _errors(surf, refined, sym)
+    assert before[caught].mean() > 0.05
+    assert after[caught].mean() < 0.01
+    np.testing.assert_array_equal(refined[~tip], start[~tip])
+
+
 def test_anchors_agree_within_the_tolerance(mirror):
     surf, sym, ps = _surface(mirror)
     anchors = sym[ps].copy()

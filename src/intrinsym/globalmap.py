@@ -398,7 +398,8 @@ def refined_map(
     anchors better (:func:`intrinsym.refine.consistent_anchors`: a part the map flipped
     or slid); each vertex is trilaterated against its ``p.refine_anchors`` nearest
     anchored samples within ``REFINE_REACH`` (those there are, where fewer), and keeps its
-    image where that keeps the distances to within ``tolerance`` target spacings.
+    image where that keeps the distances to within ``tolerance`` target spacings, in the
+    root mean square and to the nearest anchor.
 
     Parameters
     ----------

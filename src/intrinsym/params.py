@@ -45,8 +45,9 @@ CELL_RADIUS = 0.05
 #: (:func:`intrinsym.globalmap.zoomout_map`).
 GUIDE_TOLERANCE = 0.05
 #: A vertex whose global-map image keeps its geodesic distances to the anchors of
-#: ``refine_anchors`` within this many target spacings (root mean square) keeps it
-#: (:func:`intrinsym.refine.trilaterate`; measured in docs/results.md).
+#: ``refine_anchors`` within this many target spacings (root mean square, and to the
+#: nearest anchor) keeps it (:func:`intrinsym.refine.trilaterate`; measured in
+#: docs/results.md).
 REFINE_TOLERANCE = 2.0
 #: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
 REFINE_REACH = 0.3

@@ -12,9 +12,11 @@ measured from the samples' images a_i instead:
 found by steepest descent over the geodesic graph's neighbours, starting from x's
 current image, so that y stays in the basin the map already chose (a thin part such as
 an arm has a second, mirrored basin). A vertex whose current image already keeps the
-distances to within ``tolerance`` (root mean square) keeps it: there the spectral map is
-as precise as the anchors (a densely meshed, little posed head), and trilateration
-would only add the anchors' own noise.
+distances to within ``tolerance`` (root mean square), and the distance to its nearest
+anchor too, keeps it: there the spectral map is as precise as the anchors (a densely
+meshed, little posed head), and trilateration would only add the anchors' own noise. The
+nearest anchor is what catches the tip of a limb turned about the limb: that turn keeps
+the distances to the anchors up the limb, which hold the mean down.
 
 The anchors are the marginals' argmax targets; a sample whose argmax lies farther than
 ``agree`` from the map's own image of it is used only where the argmax keeps the
@@ -215,7 +217,9 @@ def _descend(lo, hi, start, ptr, cols, targets, embedding, indptr, indices, tole
     """Steepest descent of the queries ``lo:hi`` over the graph's neighbours, from ``start[q]``, to a
     local minimum of ``sum_k (embedding[y, cols[k]] - targets[k])^2`` over k in
     ``ptr[q]:ptr[q + 1]``; a query with no terms, or whose start costs at most
-    ``tolerance2`` per term, keeps its start. The images go to ``out``, which holds the starts."""
+    ``tolerance2`` per term and at most ``tolerance2`` in the term of its smallest target
+    (the nearest anchor, where the targets are distances), keeps its start. The images go
+    to ``out``, which holds the starts."""
     for q in range(lo, hi):
         a0 = ptr[q]
         a1 = ptr[q + 1]
@@ -223,10 +227,14 @@ def _descend(lo, hi, start, ptr, cols, targets, embedding, indptr, indices, tole
             continue
         y = start[q]
         best = 0.0
+        nearest = a0
         for k in range(a0, a1):
             r = embedding[y, cols[k]] - targets[k]
             best += r * r
-        if best <= tolerance2 * (a1 - a0):
+            if targets[k] < targets[nearest]:
+                nearest = k
+        r = embedding[y, cols[nearest]] - targets[nearest]
+        if best <= tolerance2 * (a1 - a0) and r * r <= tolerance2:
             continue
         for _ in range(MAX_STEPS):
             move = -1
@@ -296,8 +304,9 @@ def trilaterate(
         all lie on one side correct the image along the limb without turning it about
         the limb into the mirrored basin.
     tolerance : float
-        A query whose current image keeps the distances to this root mean square residual
-        keeps it (graph length units).
+        A query whose current image keeps the distances to this root mean square residual,
+        and the distance to its nearest sample's anchor to this residual, keeps it (graph
+        length units).
     reach : float
         Samples farther than this from a query are not its anchors; distances from an
         anchor are computed up to ``reach`` plus twice the tolerance further, and count
@@ -307,7 +316,7 @@ def trilaterate(
     -------
     (n,) int64
         Refined images; ``start`` where no sample is within ``reach`` or the current
-        image is within ``tolerance``.
+        image is within ``tolerance`` (in the mean and at the nearest anchor).
     """
     queries = np.asarray(queries, dtype=np.int64)
     start = np.asarray(start, dtype=np.int64)
