@@ -274,8 +274,8 @@ def orient_faces(faces: np.ndarray) -> np.ndarray:
 
     Meshes from scans and exports are not always wound consistently, and the vertex
     normals follow the winding (:func:`vertex_normals`), so do the spin images and the
-    reflection test of the global/partial decision (:mod:`intrinsym.reflection`; TOSCA
-    cat1 with 30 % of its faces reversed: the reflection share 0.864 -> 0.664). The
+    reflection test of the global/partial decision (:mod:`intrinsym.reflection`;
+    measured in docs/results.md, "Robustness to real-scan defects"). The
     faces connected across manifold edges (shared by exactly two faces) are made
     consistent along a breadth-first tree of that adjacency, and each such set keeps the
     winding most of its faces had (the first face's on a tie). Written here rather than
