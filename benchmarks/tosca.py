@@ -17,7 +17,9 @@ Per shape it records the marginal scores of the unary and of BP
 (:func:`intrinsym.evaluate.score_marginals`: mirror hit, peak recall, decoy recall,
 breadth), the global symmetry map's fraction of vertices within 0.05 and 0.10 of the
 true image and its mean error (:func:`intrinsym.evaluate.score_map`, geodesic, units of
-sqrt(area); what ``intrinsym evaluate`` reports), whether a global symmetry was found,
+sqrt(area); what ``intrinsym evaluate`` reports), the same two shares of the surface area
+(each vertex weighed by the area it stands for: a finely meshed hand holds more of the
+vertices than of the area), whether a global symmetry was found,
 the distortion of that map and of the true one (:func:`intrinsym.distortion.map_distortion`:
 the share of vertex pairs within 0.5 whose geodesic distance the map changes by more
 than 0.05, which tells how near to an isometry the pose keeps its symmetry),
@@ -105,7 +107,7 @@ _REFLECTION = (
 #: vertices the found maps miss (0.011-0.018; docs/results.md).
 LOCAL_ISOMETRY = 0.01
 #: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 7
+CACHE_FORMAT = 8
 
 
 # --------------------------------------------------------------------------- shapes
@@ -306,7 +308,8 @@ def _clean_floats(obj):
 def _map_row(scores) -> dict:
     """The summary numbers of ``MapScores.as_dict`` (not its curve)."""
     full = scores.as_dict()
-    return {key: full[key] for key in ("within_0.05", "within_0.10", "mean_error", "coverage")}
+    keys = ("within_0.05", "within_0.10", "area_within_0.05", "area_within_0.10", "mean_error", "coverage")
+    return {key: full[key] for key in keys}
 
 
 def _machine() -> str:
@@ -454,6 +457,8 @@ def _columns(stages: list[str]) -> list[tuple[str, tuple, bool, str]]:
         ("map ≤0.05", ("map", "within_0.05"), True, ".3f"),
         ("map ≤0.10", ("map", "within_0.10"), True, ".3f"),
         ("map mean error", ("map", "mean_error"), False, ".4f"),
+        ("map ≤0.05 of the area", ("map", "area_within_0.05"), True, ".3f"),
+        ("map ≤0.10 of the area", ("map", "area_within_0.10"), True, ".3f"),
         ("map distortion", ("map", "distortion", "above_0.05"), False, ".3f"),
         ("truth distortion", ("truth_distortion", "above_0.05"), False, ".3f"),
         ("truth locally isometric", ("isometric", "share"), True, ".3f"),

@@ -90,6 +90,8 @@ def test_evaluate_command(tmp_path, mirror):
     assert json.loads((out / "scores.json").read_text()) == scores
     p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy")
     assert p.returncode == 0 and "ground truth 0.000" in p.stdout
+    area = scores["map"]["area_within_0.05"], scores["map"]["area_within_0.10"]
+    assert f"(of the area {area[0]:.3f} / {area[1]:.3f})" in p.stdout
 
 
 @pytest.mark.parametrize(

@@ -83,6 +83,8 @@ def test_symmetry_map_errors(tmp_path, text, n, match):
 # --------------------------------------------------------------------------- map scores
 
 import scipy.sparse as sp  # noqa: E402
+import trimesh  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
 
 from intrinsym.evaluate import (  # noqa: E402
     correspondence_curve,
@@ -142,6 +144,35 @@ def test_score_map_on_the_mirror_shape(mirror, tmp_path):
     assert set(report) >= {"within_0.05", "within_0.10", "mean_error", "curve"}
     plot_curve(s, tmp_path / "curve.png")
     assert (tmp_path / "curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_correspondence_curve_weighted_by_hand():
+    errors = np.array([0.0, 0.02, 0.2, np.inf])
+    assert correspondence_curve(errors, np.array([0.0, 0.05, 0.5])).tolist() == [0.25, 0.5, 0.75]
+    weighted = correspondence_curve(errors, np.array([0.0, 0.05, 0.5]), np.array([1.0, 2.0, 3.0, 4.0]))
+    np.testing.assert_allclose(weighted, [0.1, 0.3, 0.6])
+
+
+def test_score_map_by_area_does_not_depend_on_where_the_mesh_is_dense(mirror):
+    # right on the half x >= 0 only, the mirror image of the half x <= 0: a half of the
+    # area; split every triangle of that half in four, and a larger share of the vertices
+    v, f, sym = mirror
+    right = np.where(v[:, 0] >= -1e-9, sym, np.arange(len(v)))
+    coarse = score_map(right, from_arrays(v, f), sym)
+    assert coarse.within(0.0, by_area=True) == pytest.approx(0.5, abs=0.02)
+    mesh = trimesh.Trimesh(v, f, process=False)
+    positive = np.flatnonzero(v[f].mean(axis=1)[:, 0] > 0)
+    vs, fs, index = trimesh.remesh.subdivide(mesh.vertices, mesh.faces, face_index=positive, return_index=True)
+    fine_v, fine_f = np.asarray(vs), np.asarray(fs)
+    assert np.array_equal(fine_v[: len(v)], v)
+    fine_sym = cKDTree(fine_v).query(fine_v * [-1.0, 1.0, 1.0])[1]
+    # the new vertices lie on the half x > 0 (midpoints of its triangles' edges): mapped right
+    fine_right = np.where(fine_v[:, 0] >= -1e-9, fine_sym, np.arange(len(fine_v)))
+    fine_right[: len(v)] = right
+    fine = score_map(fine_right, from_arrays(fine_v, fine_f), fine_sym)
+    assert fine.within(0.0) > coarse.within(0.0) + 0.2
+    assert fine.within(0.0, by_area=True) == pytest.approx(coarse.within(0.0, by_area=True), abs=0.02)
+    assert set(fine.as_dict()) >= {"area_within_0.05", "area_within_0.10"}
 
 
 def test_labels_and_missing_entries(tmp_path):

@@ -10,7 +10,7 @@ import trimesh
 
 from conftest import PYRAMID_F, PYRAMID_V, mirror_shape, sphere_points
 from intrinsym.errors import InputError
-from intrinsym.shape import Shape, clean, from_arrays, orient_faces, surface_area, vertex_normals
+from intrinsym.shape import Shape, clean, from_arrays, orient_faces, surface_area, vertex_areas, vertex_normals
 
 # ---------------------------------------------------------------------------
 # construction and validation
@@ -207,6 +207,20 @@ def test_surface_area_of_cube_and_icosphere():
 def test_surface_area_estimate_of_point_cloud():
     cloud = from_arrays(sphere_points(20000, seed=3, radius=2.0))
     assert surface_area(cloud) == pytest.approx(16 * np.pi, rel=0.10)
+
+
+def test_vertex_areas_by_hand_and_summing_to_the_surface_area():
+    # the unit square as triangles (0, 1, 2) and (0, 2, 3), and a vertex no triangle uses
+    square = from_arrays(
+        np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [5, 5, 5]], dtype=float),
+        np.array([[0, 1, 2], [0, 2, 3]]),
+    )
+    np.testing.assert_allclose(vertex_areas(square), [1 / 3, 1 / 6, 1 / 3, 1 / 6, 0.0])
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    mesh = from_arrays(sphere.vertices, sphere.faces)
+    assert vertex_areas(mesh).sum() == pytest.approx(surface_area(mesh), rel=1e-12)
+    cloud = from_arrays(sphere_points(2000, seed=3))
+    assert vertex_areas(cloud).sum() == pytest.approx(surface_area(cloud), rel=1e-12)
 
 
 def test_mesh_vertex_normals_point_outward():

@@ -496,6 +496,7 @@ def _run(args: argparse.Namespace) -> int:
             m = report["map"]
             print(
                 f"global map: within 0.05 {m['within_0.05']:.3f}  within 0.10 {m['within_0.10']:.3f}  "
+                f"(of the area {m['area_within_0.05']:.3f} / {m['area_within_0.10']:.3f})  "
                 f"mean error {m['mean_error']:.4f}  coverage {m['coverage']:.3f}  (curve.png)"
             )
             for label, value in m["segmentation"].items():

@@ -45,7 +45,7 @@ from . import geodesics
 from .distortion import map_distortion
 from .errors import InputError
 from .files import atomic_write
-from .shape import Shape, surface_area
+from .shape import Shape, surface_area, vertex_areas
 
 
 @dataclass(frozen=True)
@@ -308,6 +308,11 @@ class MapScores:
     fraction : (K,) float64
         Fraction of the scored vertices (all that have a true image) whose predicted
         image lies within t of the true one.
+    area_fraction : (K,) float64
+        The same share of the scored surface area (each vertex weighed by
+        :func:`intrinsym.shape.vertex_areas`): unlike ``fraction`` it does not depend on
+        where the mesh is dense (a finely meshed hand holds a larger share of the
+        vertices than of the area).
     mean_error : float
         Mean error over the vertices with a prediction (nan when there is none).
     coverage : float
@@ -320,19 +325,24 @@ class MapScores:
 
     thresholds: np.ndarray
     fraction: np.ndarray
+    area_fraction: np.ndarray
     mean_error: float
     coverage: float
     n_vertices: int
     segmentation: dict = field(default_factory=dict)
 
-    def within(self, t: float) -> float:
-        """Fraction of vertices within ``t`` (the curve at its nearest threshold <= t)."""
-        return float(self.fraction[np.searchsorted(self.thresholds, t + 1e-12) - 1])
+    def within(self, t: float, by_area: bool = False) -> float:
+        """Fraction of vertices (``by_area``: of the area) within ``t`` (the curve at its
+        nearest threshold <= t)."""
+        curve = self.area_fraction if by_area else self.fraction
+        return float(curve[np.searchsorted(self.thresholds, t + 1e-12) - 1])
 
     def as_dict(self) -> dict:
         return {
             "within_0.05": self.within(0.05),
             "within_0.10": self.within(0.10),
+            "area_within_0.05": self.within(0.05, by_area=True),
+            "area_within_0.10": self.within(0.10, by_area=True),
             "mean_error": self.mean_error,
             "coverage": self.coverage,
             "n_vertices": self.n_vertices,
@@ -396,10 +406,17 @@ def map_errors(predicted: np.ndarray, truth: np.ndarray, graph) -> np.ndarray:
     return err
 
 
-def correspondence_curve(errors: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
-    """(K,) fraction of the errors (N,) at most each threshold (K,)."""
-    e = np.sort(np.asarray(errors, dtype=np.float64))
-    return np.searchsorted(e, np.asarray(thresholds, dtype=np.float64), side="right") / max(len(e), 1)
+def correspondence_curve(errors: np.ndarray, thresholds: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """(K,) fraction of the errors (N,) at most each threshold (K,); with ``weights``
+    (N,), non-negative, the fraction of their sum."""
+    e = np.asarray(errors, dtype=np.float64)
+    t = np.asarray(thresholds, dtype=np.float64)
+    if weights is None:
+        return np.searchsorted(np.sort(e), t, side="right") / max(len(e), 1)
+    order = np.argsort(e, kind="stable")
+    cumulative = np.concatenate([[0.0], np.cumsum(np.asarray(weights, dtype=np.float64)[order])])
+    total = cumulative[-1]
+    return cumulative[np.searchsorted(e[order], t, side="right")] / total if total > 0 else np.zeros(len(t))
 
 
 def segmentation_scores(predicted: np.ndarray, truth: np.ndarray, labels: np.ndarray) -> dict[int, float]:
@@ -472,6 +489,7 @@ def score_map(
     return MapScores(
         thresholds=np.asarray(thresholds, dtype=np.float64),
         fraction=correspondence_curve(err, thresholds),
+        area_fraction=correspondence_curve(err, thresholds, vertex_areas(shape)[scored]),
         mean_error=float(np.mean(err[has])) if has.any() else float("nan"),
         coverage=float(np.mean(has)),
         n_vertices=len(pred),

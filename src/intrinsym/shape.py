@@ -341,6 +341,20 @@ def orient_faces(faces: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------
 
 
+def _sixth_neighbour_squared(vertices: np.ndarray) -> np.ndarray:
+    """(N,) squared distance from every point to its 6th nearest other point."""
+    k = min(7, len(vertices))
+    distances, _ = cKDTree(vertices).query(vertices, k=k)
+    return distances[:, -1] ** 2
+
+
+def _triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) area of every triangle."""
+    corners = vertices[np.asarray(faces)]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return 0.5 * np.linalg.norm(cross, axis=1)
+
+
 def surface_area(shape: Shape) -> float:
     """Total surface area, in squared file units.
 
@@ -361,12 +375,31 @@ def surface_area(shape: Shape) -> float:
     """
     vertices = np.asarray(shape.vertices, dtype=np.float64)
     if shape.faces is None:
-        k = min(7, len(vertices))
-        distances, _ = cKDTree(vertices).query(vertices, k=k)
-        return float(np.pi * np.sum(distances[:, -1] ** 2) / 6.0)
-    corners = vertices[np.asarray(shape.faces)]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return float(0.5 * np.linalg.norm(cross, axis=1).sum())
+        return float(np.pi * np.sum(_sixth_neighbour_squared(vertices)) / 6.0)
+    return float(_triangle_areas(vertices, shape.faces).sum())
+
+
+def vertex_areas(shape: Shape) -> np.ndarray:
+    """Area each vertex stands for, in squared file units; they sum to :func:`surface_area`.
+
+    Parameters
+    ----------
+    shape : Shape
+        Mesh or point cloud with N vertices.
+
+    Returns
+    -------
+    (N,) float64
+        For a mesh, a third of the area of every triangle around the vertex (0 for a
+        vertex no triangle uses); for a point cloud, ``pi * r6**2 / 6`` as in
+        :func:`surface_area`.
+    """
+    vertices = np.asarray(shape.vertices, dtype=np.float64)
+    if shape.faces is None:
+        return np.pi * _sixth_neighbour_squared(vertices) / 6.0
+    faces = np.asarray(shape.faces, dtype=np.int64)
+    thirds = np.repeat(_triangle_areas(vertices, faces) / 3.0, 3)
+    return np.bincount(faces.ravel(), weights=thirds, minlength=len(vertices))
 
 
 def vertex_normals(shape: Shape, k: int = 12) -> np.ndarray:

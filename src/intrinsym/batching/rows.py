@@ -52,6 +52,8 @@ COLUMNS = (
     "breadth",
     "map_within_0.05",
     "map_within_0.10",
+    "map_area_within_0.05",
+    "map_area_within_0.10",
     "map_mean_error",
     "map_coverage",
     "map_distortion",
@@ -59,7 +61,7 @@ COLUMNS = (
 )
 #: Scores of ``intrinsym evaluate`` that become columns: marginal scores, then the map's.
 MARGINAL_SCORES = ("mirror_hit", "peak_recall", "decoy_recall", "breadth")
-MAP_SCORES = ("within_0.05", "within_0.10", "mean_error", "coverage")
+MAP_SCORES = ("within_0.05", "within_0.10", "area_within_0.05", "area_within_0.10", "mean_error", "coverage")
 
 
 def base_row(item: Item, key: str, status: str, error: str | None = None) -> dict[str, Any]:
