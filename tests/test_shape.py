@@ -219,6 +219,8 @@ def test_vertex_areas_by_hand_and_summing_to_the_surface_area():
     sphere = trimesh.creation.icosphere(subdivisions=3)
     mesh = from_arrays(sphere.vertices, sphere.faces)
     assert vertex_areas(mesh).sum() == pytest.approx(surface_area(mesh), rel=1e-12)
+    # trimesh: a third of each incident face's area, through its vertex-face incidence
+    np.testing.assert_allclose(vertex_areas(mesh), sphere.faces_sparse @ sphere.area_faces / 3, rtol=1e-12)
     cloud = from_arrays(sphere_points(2000, seed=3))
     assert vertex_areas(cloud).sum() == pytest.approx(surface_area(cloud), rel=1e-12)
 
