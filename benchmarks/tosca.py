@@ -35,7 +35,7 @@ seconds per stage and in total (the wall time of the ``detect`` call), and the
 baseline's map scores and seconds (``spectral_symmetry`` alone). Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/tosca.py --data DATA [--cache DIR --tag TAG]
-        [--shapes cat0 kids ...] [--jobs N] [--json] [--stages] [-o TABLE.md]
+        [--shapes cat0 kids ...] [--jobs N] [--param NAME=VALUE ...] [--json] [--stages] [-o TABLE.md]
 
 ``DATA`` is the research data folder (holding ``tosca_sym/``, ``kids_sym/``, ``scape/``
 and ``static/``); without ``--data`` the environment variable ``INTRINSYM_DATA`` names
@@ -44,7 +44,10 @@ it. The script skips (exit 0, a message) when neither is set or the folder is ab
 ``--shapes`` takes shape names (``cat0``, ``kids``, ``scape``) or class names (``cat``:
 all its poses). ``--cache DIR`` keeps one JSON file per shape (``DIR/<shape>.json``); a
 shape whose file exists with the same ``--tag`` and package version is read back, not
-recomputed, so an interrupted run resumes where it stopped. ``--jobs N`` runs N shapes at
+recomputed, so an interrupted run resumes where it stopped. ``--param NAME=VALUE``
+(repeatable) runs ``detect`` with that :class:`intrinsym.Params` field changed (``--param
+rho=0.3``); the rows record it, a cached row counts only with the same changes, and the
+table's last lines name them. ``--jobs N`` runs N shapes at
 once in separate processes (each holds up to about 1.5 GB on the largest meshes).
 
 Output: one Markdown table (shapes, then the mean and worst of every column over all
@@ -80,7 +83,7 @@ from pathlib import Path
 import numpy as np
 
 import intrinsym
-from intrinsym import confidence, distortion, evaluate, geodesics, spectral
+from intrinsym import confidence, distortion, evaluate, geodesics, params, spectral
 from intrinsym.params import RETURN_RADIUS
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
@@ -324,8 +327,9 @@ def _machine() -> str:
     return f"{model}, {os.cpu_count()} cores"
 
 
-def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
-    """Detect and baseline on one shape; the JSON-ready row."""
+def run_case(case: Case, tag: str | None, seed: int = 0, overrides: Mapping | None = None) -> dict:
+    """Detect (the defaults, but ``overrides``: Params field -> value) and baseline on one
+    shape; the JSON-ready row."""
     shapes = _shape_module()
     shape = intrinsym.load(case.mesh)
     n = len(shape.vertices)
@@ -345,7 +349,7 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
         row["truth"] = f"{case.truth.parent.name}/{case.truth.name}"
 
     start = time.perf_counter()
-    result = intrinsym.detect(case.mesh, seed=seed)
+    result = intrinsym.detect(case.mesh, params.make_params(**overrides) if overrides else None, seed=seed)
     row["seconds_total"] = time.perf_counter() - start
     info = result.info
     source_vertex, target_vertex = _sample_vertices(result)
@@ -392,13 +396,14 @@ def run_case(case: Case, tag: str | None, seed: int = 0) -> dict:
     }
     row["version"] = intrinsym.__version__
     row["tag"] = tag
+    row["overrides"] = dict(overrides or {})
     row["cache_format"] = CACHE_FORMAT
     row["machine"] = _machine()
     row["python"] = platform.python_version()
     return _clean_floats(row)
 
 
-def _cached(cache: Path | None, case: Case, tag: str | None) -> dict | None:
+def _cached(cache: Path | None, case: Case, tag: str | None, overrides: Mapping) -> dict | None:
     if cache is None:
         return None
     path = cache / f"{case.name}.json"
@@ -414,13 +419,16 @@ def _cached(cache: Path | None, case: Case, tag: str | None) -> dict | None:
             file=sys.stderr,
         )
         return None
+    if (row.get("overrides") or {}) != overrides:
+        print(f"{case.name}: cache entry of other parameters {row.get('overrides')}: recomputing", file=sys.stderr)
+        return None
     return row
 
 
-def _work(case: Case, tag: str | None, cache: Path | None, seed: int) -> dict:
+def _work(case: Case, tag: str | None, cache: Path | None, seed: int, overrides: Mapping) -> dict:
     """Worker: one shape, written to the cache (atomically) when there is one."""
     try:
-        row = run_case(case, tag, seed)
+        row = run_case(case, tag, seed, overrides)
     except Exception as err:  # noqa: BLE001 - one failing shape must not stop the benchmark
         traceback.print_exc()
         return {"shape": case.name, "class": case.cls, "error": f"{type(err).__name__}: {err}"}
@@ -587,6 +595,9 @@ def markdown(rows: list[dict], show_stages: bool = False) -> str:
         + "; ".join(f"tag {t}, intrinsym {v}, {m}" for t, v, m in meta)
         + "."
     )
+    changed = sorted({json.dumps(r.get("overrides") or {}, sort_keys=True) for r in ok})
+    if changed != ["{}"]:
+        out.append("Parameters other than the defaults: " + "; ".join(changed) + ".")
     failed = [r for r in rows if "error" in r]
     if failed:
         out.append("Failed: " + "; ".join(f"{r['shape']}: {r['error']}" for r in failed) + ".")
@@ -594,6 +605,19 @@ def markdown(rows: list[dict], show_stages: bool = False) -> str:
 
 
 # --------------------------------------------------------------------------- main
+
+
+def _overrides(texts: list[str]) -> dict:
+    """``NAME=VALUE`` texts as Params field -> value (:meth:`intrinsym.params.Field.parse`)."""
+    fields = {f.name: f for f in params.describe()}
+    out = {}
+    for text in texts:
+        name, sep, value = text.partition("=")
+        if not sep or name not in fields:
+            raise intrinsym.ParameterError(f"{text!r} is not NAME=VALUE with NAME a Params field")
+        out[name] = fields[name].parse(value)
+    params.make_params(**out)  # checks the values together
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -604,10 +628,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cache", type=Path, help="folder of per-shape JSON results, reused when present")
     parser.add_argument("--tag", help="code tag recorded in (and required of) the cached results")
     parser.add_argument("--seed", type=int, default=0, help="detect's seed (default 0)")
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="run detect with this Params field changed (repeatable; cached rows must have the same)",
+    )
     parser.add_argument("--json", action="store_true", help="print the rows as a JSON list")
     parser.add_argument("--stages", action="store_true", help="a seconds column for every stage")
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown table here")
     args = parser.parse_args(argv)
+    try:
+        overrides = _overrides(args.param)
+    except intrinsym.ParameterError as err:
+        parser.error(f"--param {err}")
     data = args.data or (Path(os.environ["INTRINSYM_DATA"]) if os.environ.get("INTRINSYM_DATA") else None)
     if data is None or not data.is_dir():
         print(f"research data not available ({data or 'give --data DIR or set INTRINSYM_DATA'}): skipped")
@@ -620,7 +655,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, dict] = {}
     pending = []
     for case in todo:
-        row = _cached(args.cache, case, args.tag)
+        row = _cached(args.cache, case, args.tag, overrides)
         if row is not None:
             rows[case.name] = row
             print(f"{case.name}: cached", file=sys.stderr)
@@ -643,10 +678,10 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.jobs <= 1:
         for case in pending:
-            done(case, _work(case, args.tag, args.cache, args.seed))
+            done(case, _work(case, args.tag, args.cache, args.seed, overrides))
     else:
         with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
-            futures = {pool.submit(_work, case, args.tag, args.cache, args.seed): case for case in pending}
+            futures = {pool.submit(_work, case, args.tag, args.cache, args.seed, overrides): case for case in pending}
             for future in as_completed(futures):
                 done(futures[future], future.result())
 

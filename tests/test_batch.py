@@ -75,6 +75,15 @@ def _mtimes(folder: Path) -> dict[str, int]:
     return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
 
 
+def test_a_manifest_cell_that_is_no_value_names_the_file_and_column(tmp_path: Path) -> None:
+    (tmp_path / "m.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    (tmp_path / "list.csv").write_text("mesh,rho,n_source\nm.off,0.3,\n")
+    assert items.read_manifest(str(tmp_path / "list.csv"))[0]["params"] == {"rho": 0.3}
+    (tmp_path / "bad.csv").write_text("mesh,rho\nm.off,high\n")
+    with pytest.raises(intrinsym.ParameterError, match=r"bad\.csv: manifest column rho: 'high' is not a float"):
+        items.read_manifest(str(tmp_path / "bad.csv"))
+
+
 def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path, meshes: Path, tmp_path: Path) -> None:
     out, frame = by_path
     assert sorted(frame["name"]) == ["broken", "cubo", "spot", "star"]

@@ -12,6 +12,7 @@ from conftest import shared
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import scores  # noqa: E402
+import tosca  # noqa: E402
 
 
 def test_score_table_markdown():
@@ -70,6 +71,19 @@ def test_wks_spin_scores_on_tosca_wolf(tmp_path):
     assert row["unary"]["mirror_hit"] >= 0.9 and row["bp"]["mirror_hit"] >= 0.9
     assert row["bp"]["decoy_recall"] <= 0.05
     assert row["map"]["within_0.10"] >= 0.9
+
+
+def test_tosca_parameters_other_than_the_defaults(tmp_path, capsys):
+    import intrinsym
+
+    assert tosca._overrides(["rho=0.3", "remove_trivial=no"]) == {"rho": 0.3, "remove_trivial": False}
+    for bad in ("rho", "radius=2", "rho=high", "rho=2"):
+        with pytest.raises(intrinsym.ParameterError):
+            tosca._overrides([bad])
+    with pytest.raises(SystemExit) as exit_:
+        tosca.main(["--data", str(tmp_path), "--param", "rho=high"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exit_.value.code == 2 and "--param rho: 'high' is not a float" in err[-1]
 
 
 def test_score_table_against_a_reflection(tmp_path):

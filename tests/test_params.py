@@ -78,6 +78,17 @@ def test_cli_flags_reach_params(tmp_path):
         cli.build_parser().parse_args(["detect", "--example", "-o", "x", "--schedule", "fast"])
 
 
+def test_a_field_parses_its_text():
+    fields = {f.name: f for f in describe()}
+    assert fields["rho"].parse("0.3") == 0.3 and fields["n_source"].parse("150") == 150
+    assert fields["remove_trivial"].parse("no") is False and fields["remove_trivial"].parse("True") is True
+    assert fields["trivial_weight"].parse("auto") == "auto" and fields["trivial_weight"].parse("0.5") == 0.5
+    assert fields["schedule"].parse("residual") == "residual"
+    for name, text in (("rho", "high"), ("n_source", "1.5"), ("remove_trivial", "maybe")):
+        with pytest.raises(intrinsym.ParameterError, match=f"^{name}: '{text}' is not a"):
+            fields[name].parse(text)
+
+
 def test_values_are_checked_at_construction():
     with pytest.raises(intrinsym.ParameterError, match="schedule must be one of"):
         Params(schedule="fast")

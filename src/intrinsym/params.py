@@ -511,6 +511,21 @@ class Field:
     unit: str | None
     self_match: bool
 
+    def parse(self, text: str) -> Any:
+        """The value a text (a manifest cell, ``NAME=VALUE``) gives this parameter;
+        :class:`~intrinsym.errors.ParameterError` naming it where the text is no value."""
+        if self.kind is bool:
+            lowered = text.lower()
+            if lowered not in ("true", "false", "1", "0", "yes", "no"):
+                raise ParameterError(f"{self.name}: {text!r} is not a boolean")
+            return lowered in ("true", "1", "yes")
+        if text in self.words or (self.choices and text in self.choices):
+            return text
+        try:
+            return self.kind(text)
+        except ValueError:
+            raise ParameterError(f"{self.name}: {text!r} is not a {self.kind.__name__}") from None
+
 
 def _type_parts(hint: Any) -> tuple[list[Any], bool]:
     """The non-None members of a type hint and whether None is one."""
@@ -537,23 +552,8 @@ def describe() -> list[Field]:
         m = f.metadata
         flag = m["flag"] or "--" + f.name.replace("_", "-")
         off = (m["off_flag"] or "--no-" + flag[2:]) if kind is bool else None
-        out.append(
-            Field(
-                f.name,
-                flag,
-                off,
-                kind,
-                choices,
-                words,
-                optional,
-                f.default,
-                m["help"],
-                m["group"],
-                m["paper"],
-                m["unit"],
-                m["self_match"],
-            )
-        )
+        fixed = (m["help"], m["group"], m["paper"], m["unit"], m["self_match"])
+        out.append(Field(f.name, flag, off, kind, choices, words, optional, f.default, *fixed))
     return out
 
 

@@ -109,21 +109,6 @@ def _expand(entry: str) -> list[Path]:
     raise InputError(f"{entry}: no such file or folder")
 
 
-def _value(field: Any, text: str) -> Any:
-    """A manifest cell as the value of a :class:`Params` field."""
-    if field.kind is bool:
-        lowered = text.lower()
-        if lowered not in ("true", "false", "1", "0", "yes", "no"):
-            raise ParameterError(f"manifest column {field.name}: {text!r} is not a boolean")
-        return lowered in ("true", "1", "yes")
-    if text in field.words or (field.choices and text in field.choices):
-        return text
-    try:
-        return field.kind(text)
-    except ValueError:
-        raise ParameterError(f"manifest column {field.name}: {text!r} is not a {field.kind.__name__}") from None
-
-
 def read_manifest(path: str, extra: Sequence[str] = ()) -> list[dict[str, Any]]:
     """Rows of a CSV manifest: file columns as absolute paths (relative ones are relative
     to the manifest's folder), parameter columns under ``"params"`` (typed), the rest
@@ -162,7 +147,10 @@ def read_manifest(path: str, extra: Sequence[str] = ()) -> list[dict[str, Any]]:
             if not text:
                 continue
             if column in fields:
-                row["params"][column] = _value(fields[column], text)
+                try:
+                    row["params"][column] = fields[column].parse(text)
+                except ParameterError as err:
+                    raise ParameterError(f"{path}: manifest column {err}") from None
             elif column in ("mesh", "source", "target", "symmetry_map", "labels"):
                 row[column] = str((base / text).resolve())
             else:
