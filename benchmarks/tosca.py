@@ -349,7 +349,7 @@ def run_case(case: Case, tag: str | None, seed: int = 0, overrides: Mapping | No
         row["truth"] = f"{case.truth.parent.name}/{case.truth.name}"
 
     start = time.perf_counter()
-    result = intrinsym.detect(case.mesh, params.make_params(**overrides) if overrides else None, seed=seed)
+    result = intrinsym.detect(case.mesh, params.make_params(**(overrides or {})), seed=seed)
     row["seconds_total"] = time.perf_counter() - start
     info = result.info
     source_vertex, target_vertex = _sample_vertices(result)

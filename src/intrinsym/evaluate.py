@@ -410,13 +410,11 @@ def correspondence_curve(errors: np.ndarray, thresholds: np.ndarray, weights: np
     """(K,) fraction of the errors (N,) at most each threshold (K,); with ``weights``
     (N,), non-negative, the fraction of their sum."""
     e = np.asarray(errors, dtype=np.float64)
-    t = np.asarray(thresholds, dtype=np.float64)
-    if weights is None:
-        return np.searchsorted(np.sort(e), t, side="right") / max(len(e), 1)
+    w = np.ones(len(e)) if weights is None else np.asarray(weights, dtype=np.float64)
     order = np.argsort(e, kind="stable")
-    cumulative = np.concatenate([[0.0], np.cumsum(np.asarray(weights, dtype=np.float64)[order])])
-    total = cumulative[-1]
-    return cumulative[np.searchsorted(e[order], t, side="right")] / total if total > 0 else np.zeros(len(t))
+    cumulative = np.concatenate([[0.0], np.cumsum(w[order])])
+    reached = cumulative[np.searchsorted(e[order], np.asarray(thresholds, dtype=np.float64), side="right")]
+    return reached / cumulative[-1] if cumulative[-1] > 0 else np.zeros(len(reached))
 
 
 def segmentation_scores(predicted: np.ndarray, truth: np.ndarray, labels: np.ndarray) -> dict[int, float]:
