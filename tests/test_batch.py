@@ -158,15 +158,14 @@ def test_a_killed_worker_s_item_runs_again_and_is_reported_once(meshes: Path, cl
 
     def kill_one_busy_worker() -> None:
         with distributed.Client(cluster.scheduler_address, timeout="20s") as client:
+            pids = client.run(os.getpid)  # asked beforehand: the kill follows the poll at once
             deadline = time.monotonic() + 120
             while time.monotonic() < deadline and not killed:
                 busy = [w for w, keys in client.processing().items() if keys]
                 if busy:
-                    time.sleep(0.5)  # well inside the item
-                    pids = client.run(os.getpid, workers=busy[:1])
                     os.kill(pids[busy[0]], signal.SIGKILL)
                     killed.append(busy[0])
-                time.sleep(0.1)
+                time.sleep(0.05)
 
     killer = threading.Thread(target=kill_one_busy_worker)
     killer.start()
