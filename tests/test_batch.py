@@ -161,7 +161,7 @@ def test_a_killed_worker_s_item_runs_again_and_is_reported_once(meshes: Path, cl
             pids = client.run(os.getpid)  # asked beforehand: the kill follows the poll at once
             deadline = time.monotonic() + 120
             while time.monotonic() < deadline and not killed:
-                busy = [w for w, keys in client.processing().items() if keys]
+                busy = [w for w, keys in client.processing().items() if keys and w in pids]
                 if busy:
                     os.kill(pids[busy[0]], signal.SIGKILL)
                     killed.append(busy[0])
