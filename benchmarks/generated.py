@@ -11,7 +11,9 @@ shapes of :mod:`intrinsym.shapes` and checks these criteria:
    extracted symmetry that carries at least half of the arm's source samples there;
 3. the paper's segmentation score of the extracted symmetry that best realises one of
    the shape's ground-truth maps is at least 0.90 for every labelled part (and, for the
-   cuboctahedron, how many of its 47 maps are realised that well);
+   cuboctahedron, how many of its 47 maps are realised that well); reported beside, for
+   the shapes matched to themselves, how well the global map's confidence predicts its
+   precision;
 4. the partial shape (two identical limbs on an asymmetric body), at the
    library's default sizes on three seeds: the limb points' marginals peak on the other
    limb, the off-limb points' on nothing (median peak mass,
@@ -54,7 +56,7 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import evaluate, extract, geodesics, laplacian, pipeline, shapes, spectral
+from intrinsym import confidence, evaluate, extract, geodesics, laplacian, pipeline, shapes, spectral
 from intrinsym.shape import from_arrays, surface_area
 from intrinsym.vertex_maps import fitted_vertex_map
 
@@ -288,6 +290,29 @@ def check_segmentation(
     )
 
 
+def check_confidence(report: Report, name: str, result: intrinsym.Result, shape: shapes.GeneratedShape) -> None:
+    """The global map's mean confidence (``symmetry_confidence.npy``) against the share of
+    the vertices whose image lies within ``confidence.WITHIN`` of the true one under the
+    ground-truth map the global map realises best, and under the nearest of them vertex by
+    vertex (a patchwork of several symmetries is right piece by piece); the expected
+    calibration error against the best map."""
+    vmap = result.symmetry_map()
+    if not (vmap >= 0).any():
+        report.add(name, "confidence of the global map", "no global map", None)
+        return
+    mesh = from_arrays(shape.vertices, shape.faces)
+    errors = np.array([evaluate.score_map(vmap, mesh, truth).errors for truth in shape.symmetries])
+    right = errors <= confidence.WITHIN
+    calibration = confidence.calibration_report(result.symmetry_confidence(), errors[np.argmax(right.mean(axis=1))])
+    report.add(
+        name,
+        "confidence: mean / within 0.05 (best, nearest truth) / ECE",
+        f"{calibration['confidence']:.2f} / {calibration['within']:.2f}, {right.any(axis=0).mean():.2f}"
+        f" / {calibration['expected_calibration_error']:.3f}",
+        None,
+    )
+
+
 def summary(report: Report, name: str, result: intrinsym.Result, seconds: float) -> None:
     ex = result.extraction
     bp = result.info.bp
@@ -322,6 +347,7 @@ def run_cuboctahedron(report: Report, sizes: tuple[int, int], cache: Path | None
         bool(np.all(parts == 1.0)),
     )
     check_segmentation(report, shape.name, result, shape, shape)
+    check_confidence(report, shape.name, result, shape)
 
 
 def run_star(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
@@ -331,6 +357,7 @@ def run_star(report: Report, sizes: tuple[int, int], cache: Path | None, overrid
     summary(report, shape.name, result, seconds)
     check_arms(report, shape.name, result, shape.labels, shape.labels, include_self=False)
     check_segmentation(report, shape.name, result, shape, shape)
+    check_confidence(report, shape.name, result, shape)
 
 
 def run_lantern(report: Report, sizes: tuple[int, int], cache: Path | None, overrides: dict) -> None:
@@ -350,6 +377,7 @@ def run_figure(report: Report, sizes: tuple[int, int], cache: Path | None, overr
     result, seconds = cached(cache, shape.name, lambda: intrinsym.detect((shape.vertices, shape.faces), params))
     summary(report, shape.name, result, seconds)
     check_segmentation(report, shape.name, result, shape, shape)
+    check_confidence(report, shape.name, result, shape)
 
 
 def _decision(identity) -> str:

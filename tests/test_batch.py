@@ -25,6 +25,7 @@ import intrinsym
 from conftest import shared
 from intrinsym import Params, Result, shapes
 from intrinsym.batching import engine, items
+from intrinsym.batching import rows as batch_rows
 from intrinsym.cli import main
 
 #: Tiny sizes: every item takes seconds.
@@ -114,6 +115,21 @@ def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path,
     # the star's true map is a symmetry of the mesh itself: it keeps every distance
     assert rows.loc["star", "truth_distortion"] == star_scores["truth_distortion"]["above_0.05"] == 0.0
     assert np.isnan(rows.loc["spot", "mirror_hit"])
+    # the global confidence needs no truth; its calibration against the truth does
+    for name in ("spot", "star", "cubo"):
+        if rows.loc[name, "global_symmetry"]:
+            mean = float(np.load(out / name / "symmetry_confidence.npy").mean())
+            assert rows.loc[name, "global_confidence"] == pytest.approx(mean, abs=1e-6)
+        else:
+            assert rows.loc[name, "global_confidence"] is None or np.isnan(rows.loc[name, "global_confidence"])
+    assert star_scores["confidence"]["expected_calibration_error"] == rows.loc["star", "confidence_ece"]
+    # a finished folder's row, read back as a re-run or another worker reads it, is the same
+    for name in ("star", "cubo"):
+        item = items.Item(name, str(meshes / f"{name}.off"), PARAMS)
+        read_back = batch_rows.row_of_folder(item, rows.loc[name, "key"], out / name)
+        for column in ("global_score", "global_confidence", "confidence_ece", "map_within_0.10"):
+            assert read_back[column] == pytest.approx(rows.loc[name, column], nan_ok=True), column
+    assert np.isnan(rows.loc["spot", "confidence_ece"])
     on_disk = pd.read_csv(out / "summary.csv")
     assert list(on_disk["name"]) == list(frame["name"])
 
@@ -128,6 +144,10 @@ def test_a_rerun_skips_what_is_done_and_new_parameters_recompute(
     assert list(again["status"]) == ["skipped", "skipped"]  # no cluster needed: nothing to run
     assert _mtimes(out / "star") == before
     assert again["seconds"].tolist() == by_path[1].set_index("name").loc[["star", "cubo"], "seconds"].tolist()
+    # a skipped row reads the global confidence back from the folder
+    assert again["global_confidence"].tolist() == pytest.approx(
+        by_path[1].set_index("name").loc[["star", "cubo"], "global_confidence"].tolist(), nan_ok=True
+    )
     seed = Params(**{**TINY, "seed": 1})
     changed = intrinsym.batch([str(meshes / "star.off")], out, seed, scheduler=cluster.scheduler_address)
     assert list(changed["status"]) == ["done"] and _mtimes(out / "star") != before

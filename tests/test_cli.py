@@ -92,6 +92,17 @@ def test_evaluate_command(tmp_path, mirror):
     assert p.returncode == 0 and "ground truth 0.000" in p.stdout
     area = scores["map"]["area_within_0.05"], scores["map"]["area_within_0.10"]
     assert f"(of the area {area[0]:.3f} / {area[1]:.3f})" in p.stdout
+    # the confidence of symmetry_confidence.npy against the truth
+    c = scores["confidence"]
+    assert c["within"] == scores["map"]["within_0.05"] and 0.0 <= c["expected_calibration_error"] <= 1.0
+    assert c["confidence"] == pytest.approx(float(np.load(out / "symmetry_confidence.npy").mean()))
+    assert f"expected calibration error {c['expected_calibration_error']:.3f}" in p.stdout
+    # a confidence file of another mesh: one line, exit 2, the earlier scores kept
+    np.save(out / "symmetry_confidence.npy", np.zeros(5, dtype=np.float32))
+    p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy")
+    assert p.returncode == 2 and p.stderr.count("\n") == 1, p.stderr
+    assert "symmetry_confidence.npy: 5 confidences, the mesh has" in p.stderr
+    assert json.loads((out / "scores.json").read_text()) == scores
 
 
 @pytest.mark.parametrize(

@@ -98,3 +98,28 @@ def test_carried_confidence_is_that_of_the_nearest_vertex_in_a_cell():
     # every vertex in a cell, or none: unchanged
     np.testing.assert_array_equal(confidence.carried_confidence(conf, np.zeros(5, int), positions), conf)
     np.testing.assert_array_equal(confidence.carried_confidence(conf, np.full(5, -1), positions), conf)
+
+
+def test_calibration_by_hand():
+    # bin 0.2-0.3: confidences 0.25, 0.25, right 1 of 2 (gap 0.25); bin 0.9-1.0: 0.9 and
+    # 1.0 (the last bin holds 1), both right (gap 0.05); shares 1/2 each
+    ece, bins = confidence.calibration(np.array([0.25, 0.25, 0.9, 1.0]), np.array([True, False, True, True]))
+    assert ece == pytest.approx(0.5 * 0.25 + 0.5 * 0.05)
+    assert len(bins) == 10 and bins[2].share == 0.5 and bins[2].accuracy == 0.5
+    assert bins[9].confidence == pytest.approx(0.95) and bins[9].accuracy == 1.0
+    assert np.isnan(bins[0].confidence) and bins[0].share == 0.0
+    # a confidence that is the right share in each bin is calibrated
+    assert confidence.calibration(np.full(4, 0.75), np.array([True, True, True, False]))[0] == pytest.approx(0.0)
+
+
+def test_calibration_report_by_hand():
+    # right: errors within 0.05 (on the edge too); an unmapped vertex (inf) never is
+    report = confidence.calibration_report(np.array([0.25, 0.25, 0.9, 1.0]), np.array([0.05, 0.2, 0.0, np.inf]))
+    assert report["within"] == 0.5 and report["confidence"] == pytest.approx(0.6)
+    # bin 0.2-0.3: 1 of 2 right (gap 0.25); bin 0.9-1.0: 1 of 2 (gap 0.45)
+    assert report["expected_calibration_error"] == pytest.approx(0.5 * 0.25 + 0.5 * 0.45)
+    assert report["threshold"] == confidence.WITHIN == 0.05
+    assert report["bins"][0] == {"low": 0.0, "high": 0.1, "share": 0.0, "confidence": None, "accuracy": None}
+    assert report["bins"][2]["accuracy"] == 0.5
+    with pytest.raises(ValueError, match="3 confidences for 4 errors"):
+        confidence.calibration_report(np.zeros(3), np.zeros(4))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from intrinsym.errors import InputError
-from intrinsym.evaluate import load_symmetry_map, marginal_scores, partial_scores
+from intrinsym.evaluate import load_confidence, load_symmetry_map, marginal_scores, partial_scores
 
 
 def test_marginal_scores_by_hand():
@@ -88,6 +88,7 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 from intrinsym.evaluate import (  # noqa: E402
     correspondence_curve,
+    evaluation_report,
     load_labels,
     map_errors,
     plot_curve,
@@ -218,3 +219,42 @@ def test_extrinsic_mirror_finds_the_reflection_of_a_moved_shuffled_shape(mirror)
     inverse = np.argsort(order)
     assert np.array_equal(found, inverse[sym[order]])
     assert residual.max() < 1e-6 * 1000.0
+
+
+def test_load_confidence(tmp_path):
+    np.save(tmp_path / "ok.npy", np.array([0.0, 0.5, 1.0], dtype=np.float32))
+    assert load_confidence(tmp_path / "ok.npy", 3).tolist() == [0.0, 0.5, 1.0]
+    np.save(tmp_path / "big.npy", np.array([0.0, 1.5, 1.0]))
+    np.save(tmp_path / "nan.npy", np.array([0.0, np.nan, 1.0]))
+    (tmp_path / "junk.npy").write_text("junk")
+    for name, n, match in [
+        ("ok.npy", 4, "3 confidences, the mesh has 4 vertices"),
+        ("big.npy", 3, r"must lie in \[0, 1\]"),
+        ("nan.npy", 3, r"must lie in \[0, 1\]"),
+        ("junk.npy", 3, "cannot read a confidence"),
+        ("missing.npy", 3, "cannot read a confidence"),
+    ]:
+        with pytest.raises(InputError, match=match) as err:
+            load_confidence(tmp_path / name, n)
+        assert name in str(err.value)
+
+
+def test_evaluation_report_scores_the_confidence_on_the_vertices_with_a_true_image(mirror):
+    v, f, sym = mirror
+    shape = from_arrays(v, f)
+    # the true map on the vertices x > 0 and the identity elsewhere (right only on the
+    # mirror plane); a vertex without a true image is not scored
+    right = v[:, 0] > 0
+    predicted = np.where(right, sym, np.arange(len(v)))
+    truth = sym.copy()
+    truth[0] = -1
+    conf = np.where(right, 0.95, 0.15)
+    args = (np.ones((3, len(v))), np.arange(3), np.arange(len(v)), predicted, shape, truth)
+    report, scores = evaluation_report(*args, confidence=conf)
+    c = report["confidence"]
+    assert c["confidence"] == pytest.approx(conf[1:].mean())
+    assert c["within"] == pytest.approx(report["map"]["within_0.05"])
+    low = scores.errors[~right[1:]] <= 0.05  # the identity's hits on the plane
+    expected = right[1:].mean() * 0.05 + (~right[1:]).mean() * abs(low.mean() - 0.15)
+    assert c["expected_calibration_error"] == pytest.approx(expected)
+    assert 0 < low.mean() < 0.5 and "confidence" not in evaluation_report(*args)[0]

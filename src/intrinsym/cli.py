@@ -471,6 +471,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.labels and not has_map:
         raise InputError(f"{out}: no symmetry_map.npy to segment (rerun intrinsym detect)")
     n = len(shape.vertices)
+    conf_path = out / "symmetry_confidence.npy"
     report, maps = evaluate.evaluation_report(
         result.marginals,
         result.source_point_vertex,
@@ -480,6 +481,7 @@ def _run(args: argparse.Namespace) -> int:
         sym,
         labels=evaluate.load_labels(args.labels, n) if args.labels else None,
         seed=args.seed,
+        confidence=evaluate.load_confidence(conf_path, n) if has_map and conf_path.is_file() else None,
     )
     if maps is not None:
         evaluate.plot_curve(maps, out / "curve.png")
@@ -501,6 +503,13 @@ def _run(args: argparse.Namespace) -> int:
             )
             for label, value in m["segmentation"].items():
                 print(f"segmentation part {label}: {100 * value:.1f}%")
+            if "confidence" in report:
+                c = report["confidence"]
+                print(
+                    f"confidence (symmetry_confidence.npy): expected calibration error "
+                    f"{c['expected_calibration_error']:.3f}, mean {c['confidence']:.3f} against "
+                    f"{c['within']:.3f} measured within {c['threshold']}"
+                )
         truth = report["truth_distortion"]
         line = f"distortion (pairs within {truth['radius']} changed by more than 0.05): "
         if "map" in report:

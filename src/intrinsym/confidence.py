@@ -72,6 +72,9 @@ CALIBRATION = (
 )  # fmt: skip
 
 
+#: The confidence of a vertex is the probability that its image lies within this of the
+#: true one (units of sqrt(area)).
+WITHIN = 0.05
 #: Two global maps (the chosen one and the extraction's) placing a vertex's image this far
 #: apart (units of sqrt(area)) leave it no score: one of them is off by half of it at least.
 DISAGREEMENT_RANGE = 0.10
@@ -381,3 +384,51 @@ def calibration(confidence: np.ndarray, correct: np.ndarray, n_bins: int = 10) -
             ece += share * abs(accuracy - mean_conf)
         bins.append(Bin(b / n_bins, (b + 1) / n_bins, share, mean_conf, accuracy))
     return ece, bins
+
+
+def calibration_report(confidence: np.ndarray, errors: np.ndarray, n_bins: int = 10) -> dict:
+    """How well a per-vertex confidence predicts which images are right, JSON-ready.
+
+    Parameters
+    ----------
+    confidence : (N,) float array in [0, 1]
+        The confidence of every scored vertex (``symmetry_confidence.npy``).
+    errors : (N,) float array
+        Geodesic distance from each vertex's image to its true one (sqrt(area) units; inf
+        where the map gives none, which then counts as wrong).
+    n_bins : int
+        Equal-width confidence bins of :func:`calibration`.
+
+    Returns
+    -------
+    dict
+        ``expected_calibration_error``; ``confidence``, the mean confidence (the global
+        confidence over these vertices); ``within``, the share of them whose image lies
+        within :data:`WITHIN` of the true one; ``bins``, the reliability table (its empty
+        bins' mean confidence and accuracy None).
+    """
+    conf = np.asarray(confidence, dtype=np.float64)
+    right = np.asarray(errors, dtype=np.float64) <= WITHIN
+    if len(conf) != len(right) or len(conf) == 0:
+        raise ValueError(f"{len(conf)} confidences for {len(right)} errors: need as many, and some")
+    ece, bins = calibration(conf, right, n_bins)
+
+    def finite(x: float) -> float | None:
+        return None if np.isnan(x) else float(x)
+
+    return {
+        "expected_calibration_error": float(ece),
+        "confidence": float(conf.mean()),
+        "within": float(right.mean()),
+        "threshold": WITHIN,
+        "bins": [
+            {
+                "low": b.low,
+                "high": b.high,
+                "share": b.share,
+                "confidence": finite(b.confidence),
+                "accuracy": finite(b.accuracy),
+            }
+            for b in bins
+        ],
+    }

@@ -27,7 +27,11 @@ Scores of an extracted symmetry map (one image per input vertex):
 * segmentation score (the paper's Sec. 6: "the percentage of points that have been
   correctly classified. Incorrect points are either those outside the manual
   segmentation or the missing"): for a labelled part G whose true symmetric part is G',
-  the region R the predicted map sends into G' scores |R & G| / |R | G|.
+  the region R the predicted map sends into G' scores |R & G| / |R | G|;
+* calibration of the map's per-vertex confidence (the probability that the image lies
+  within 0.05 of the true one): per equal-width confidence bin, the share of its
+  vertices that do against their mean confidence, and the expected calibration error,
+  the gap weighed by the bins' shares (:func:`intrinsym.confidence.calibration_report`).
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from . import geodesics
+from .confidence import calibration_report
 from .distortion import map_distortion
 from .errors import InputError
 from .files import atomic_write
@@ -96,6 +101,25 @@ def load_symmetry_map(
     if sym.min() < (-1 if allow_missing else 0) or sym.max() >= len(sym):
         raise InputError(f"{path}: symmetry map index out of range")
     return sym
+
+
+def load_confidence(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
+    """Read a per-vertex confidence (``symmetry_confidence.npy``) as (N,) float64.
+
+    Raises
+    ------
+    InputError
+        On an unreadable file, another length than ``n_vertices``, or values outside [0, 1].
+    """
+    try:
+        values = np.asarray(np.load(path, allow_pickle=False), dtype=np.float64).ravel()
+    except (OSError, ValueError, TypeError) as err:
+        raise InputError(f"{path}: cannot read a confidence ({err})") from None
+    if len(values) != n_vertices:
+        raise InputError(f"{path}: {len(values)} confidences, the mesh has {n_vertices} vertices")
+    if not np.all((values >= 0) & (values <= 1)):
+        raise InputError(f"{path}: confidences must lie in [0, 1]")
+    return values
 
 
 def extrinsic_mirror(vertices: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
@@ -319,6 +343,8 @@ class MapScores:
         Fraction of the scored vertices with a prediction.
     n_vertices : int
         Scored vertices.
+    errors : (n_vertices,) float64
+        Each scored vertex's error (inf without a prediction), in the mesh's vertex order.
     segmentation : dict
         Part label -> segmentation score in [0, 1] (empty without labels).
     """
@@ -329,6 +355,7 @@ class MapScores:
     mean_error: float
     coverage: float
     n_vertices: int
+    errors: np.ndarray
     segmentation: dict = field(default_factory=dict)
 
     def within(self, t: float, by_area: bool = False) -> float:
@@ -491,6 +518,7 @@ def score_map(
         mean_error=float(np.mean(err[has])) if has.any() else float("nan"),
         coverage=float(np.mean(has)),
         n_vertices=len(pred),
+        errors=err,
         segmentation={} if labels is None else segmentation_scores(predicted, truth, labels),
     )
 
@@ -504,6 +532,7 @@ def evaluation_report(
     sym: np.ndarray,
     labels: np.ndarray | None = None,
     seed: int = 0,
+    confidence: np.ndarray | None = None,
 ) -> tuple[dict, MapScores | None]:
     """What ``intrinsym evaluate`` reports (``scores.json``) of a result.
 
@@ -522,13 +551,17 @@ def evaluation_report(
         Part labels for the segmentation scores.
     seed : int
         Of the decoys and of the distortion's vertices.
+    confidence : (N,) float, optional
+        The map's per-vertex confidence (``symmetry_confidence.npy``), scored on the
+        vertices with a true image.
 
     Returns
     -------
     report : dict
         :meth:`MarginalScores.as_dict`, the ground truth's :func:`map_distortion` under
         ``"truth_distortion"`` and, with a map, :meth:`MapScores.as_dict` with its
-        distortion under ``"map"``.
+        distortion under ``"map"``; with a map and a confidence, its
+        :func:`intrinsym.confidence.calibration_report` under ``"confidence"``.
     map_scores : MapScores or None
     """
     unit = geodesics.unit_area_graph(shape)
@@ -538,6 +571,9 @@ def evaluation_report(
         return report, None
     scores = score_map(predicted, shape, sym, labels=labels, unit=unit)
     report["map"] = {**scores.as_dict(), "distortion": map_distortion(predicted, shape, seed=seed, unit=unit).as_dict()}
+    if confidence is not None:
+        scored = np.asarray(sym) >= 0
+        report["confidence"] = calibration_report(np.asarray(confidence)[scored], scores.errors)
     return report, scores
 
 

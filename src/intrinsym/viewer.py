@@ -32,6 +32,7 @@ import numpy as np
 
 from . import viz
 from .errors import InputError
+from .evaluate import load_confidence
 from .files import atomic_write
 from .records import part_vertices
 from .result import Result
@@ -376,10 +377,7 @@ def write(
     except (OSError, ValueError) as err:
         raise InputError(f"{scores_path}: cannot read it ({err}); run intrinsym evaluate again") from None
     conf_path = out / "symmetry_confidence.npy"
-    try:
-        conf = np.load(conf_path) if conf_path.is_file() else None
-    except (OSError, ValueError) as err:
-        raise InputError(f"{conf_path}: cannot read it ({err})") from None
+    conf = load_confidence(conf_path, len(shape.vertices)) if conf_path.is_file() else None
     html = render_html(payload(result, shape, viz.load_symmetries(out), scores, up, confidence=conf))
     path = Path(html_path) if html_path is not None else out / "viewer.html"
 

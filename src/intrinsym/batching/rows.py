@@ -46,6 +46,7 @@ COLUMNS = (
     "symmetries",
     "global_symmetry",
     "global_score",
+    "global_confidence",
     "mirror_hit",
     "peak_recall",
     "decoy_recall",
@@ -58,6 +59,7 @@ COLUMNS = (
     "map_coverage",
     "map_distortion",
     "truth_distortion",
+    "confidence_ece",
 )
 #: Scores of ``intrinsym evaluate`` that become columns: marginal scores, then the map's.
 MARGINAL_SCORES = ("mirror_hit", "peak_recall", "decoy_recall", "breadth")
@@ -86,6 +88,7 @@ def result_row(
     symmetries: Sequence[tuple[str, float]],
     vertices: int | None,
     scores: dict[str, Any] | None,
+    global_confidence: float | None = None,
 ) -> dict[str, Any]:
     """The row of a finished item.
 
@@ -102,6 +105,9 @@ def result_row(
         Vertices of the (source) input mesh.
     scores : dict or None
         ``intrinsym evaluate``'s report (``scores.json``), when there is a ground truth.
+    global_confidence : float or None
+        The expected share of vertices mapped within 0.05 of their true image
+        (:meth:`intrinsym.Result.global_confidence`), when there is a global symmetry.
     """
     row = base_row(item, key, status)
     glob = next((score for kind, score in symmetries if kind == "global"), None)
@@ -118,6 +124,7 @@ def result_row(
         symmetries=len(symmetries),
         global_symmetry=glob is not None,
         global_score=glob,
+        global_confidence=global_confidence,
     )
     row.update({f"seconds_{stage}": float(value) for stage, value in info.seconds.items()})
     if scores:
@@ -125,6 +132,7 @@ def result_row(
         row.update({f"map_{name}": scores.get("map", {}).get(name) for name in MAP_SCORES})
         row["map_distortion"] = scores.get("map", {}).get("distortion", {}).get("above_0.05")
         row["truth_distortion"] = scores.get("truth_distortion", {}).get("above_0.05")
+        row["confidence_ece"] = scores.get("confidence", {}).get("expected_calibration_error")
     return row
 
 
@@ -132,7 +140,7 @@ def row_of_result(item: Item, key: str, result: Result, scores: dict[str, Any] |
     """:func:`result_row` of a result in memory."""
     found = [] if result.extraction is None else [(s.kind, float(s.score)) for s in result.extraction.symmetries]
     vertices = None if result.support is None else len(result.support.vertex_source)
-    return result_row(item, key, "done", result.info, found, vertices, scores)
+    return result_row(item, key, "done", result.info, found, vertices, scores, result.global_confidence())
 
 
 def row_of_folder(item: Item, key: str, folder: Path, status: str = "skipped") -> dict[str, Any]:
@@ -144,7 +152,10 @@ def row_of_folder(item: Item, key: str, folder: Path, status: str = "skipped") -
     scores_file = folder / "scores.json"
     scores = json.loads(scores_file.read_text()) if scores_file.is_file() else None
     found = [(str(r["kind"]), float(r["score"])) for r in listed]
-    return result_row(item, key, status, RunInfo.from_dict(run), found, vertices, scores)
+    conf_file = folder / "symmetry_confidence.npy"
+    has_global = any(kind == "global" for kind, _ in found) and conf_file.is_file()
+    conf = float(np.load(conf_file).mean()) if has_global else None
+    return result_row(item, key, status, RunInfo.from_dict(run), found, vertices, scores, conf)
 
 
 def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> dict[str, Any]:
@@ -168,5 +179,6 @@ def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> d
         shape,
         evaluate.load_symmetry_map(symmetry_map, n, allow_missing=True),
         labels=evaluate.load_labels(labels, n) if labels and has_map else None,
+        confidence=result.symmetry_confidence() if has_map else None,
     )
     return report

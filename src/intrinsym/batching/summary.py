@@ -20,6 +20,7 @@ FINISHED = ("done", "skipped")
 #: Score columns of the report: (column, whether larger is better).
 REPORT_SCORES = (
     ("global_score", True),
+    ("global_confidence", True),
     ("mirror_hit", True),
     ("peak_recall", True),
     ("map_within_0.10", True),
