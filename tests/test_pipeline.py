@@ -8,6 +8,7 @@ import pytest
 import trimesh
 
 import intrinsym
+from conftest import shared
 from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
 from intrinsym.distortion import local_distortion
 from intrinsym.params import MAP_MARGIN
@@ -203,6 +204,47 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     }
     assert mass["kept"] > 3 * chance and mass["removed"] < mass["kept"] / 5, mass
     assert 2 * mass["removed"] < mass["weighted"] < mass["kept"] / 2, mass
+
+
+def test_an_unsure_global_symmetry_runs_bp_again_wider_and_keeps_the_less_distorted_map(spot, spot_result, tmp_path):
+    # spot's mirror passes the reflection test; an isometry threshold of 1 makes the
+    # global symmetry rest on that test alone, as on strongly posed shapes (victoria2)
+    unsure = dict(SMALL, isometry_threshold=1.0)
+    first = intrinsym.detect(spot, intrinsym.make_params(unsure_radius=1.0, **unsure))
+    wide = intrinsym.detect(spot, intrinsym.make_params(unsure_radius=1.0, trivial_radius=0.1, **unsure))
+    both = intrinsym.detect(spot, intrinsym.make_params(**unsure))
+    assert spot_result.info.identity.wider_radius is None  # sure: one BP
+    assert first.info.identity.wider_radius is None and first.info.identity.reflection >= 0.55
+    i = both.info.identity
+    assert i.wider_radius == pytest.approx(0.08 * 1.25)
+    assert i.distortion == pytest.approx(float(np.nanmean(first.map_distortion)))
+    assert i.wider_distortion == pytest.approx(float(np.nanmean(wide.map_distortion)))
+    assert i.wider_kept == (i.wider_distortion < i.distortion)
+    kept = wide if i.wider_kept else first
+    # the kept run's marginals, map and decision statistics, bit for bit
+    np.testing.assert_array_equal(both.marginals, kept.marginals)
+    np.testing.assert_array_equal(both.symmetry_map(), kept.symmetry_map())
+    assert (i.isometry, i.reflection) == (kept.info.identity.isometry, kept.info.identity.reflection)
+    assert both.info.bp.iterations == kept.info.bp.iterations
+    # recorded in run.json
+    again = intrinsym.Result.load(both.save(tmp_path / "both"))
+    assert again.info.identity == i
+
+
+def test_victoria2_s_slid_identity_gives_way_to_the_wider_run():
+    """TOSCA victoria2 at the defaults: BP's argmax keeps 0.80 of the source edges
+    (threshold 0.85) and the reflection test passes (0.62), so the global symmetry is
+    unsure. The first run's map slides the identity just past the trivial radius (0.564
+    of the vertices within 0.10 of their true image, mean local distortion 0.0263); BP
+    again at 0.10 gives 0.851 (0.0201), and that map is kept (measured)."""
+    mesh = shared("tosca_sym/victoria2.off")
+    shape = intrinsym.load(mesh)
+    truth = evaluate.load_symmetry_map(mesh.parent / "victoria.sym", len(shape.vertices))
+    result = intrinsym.detect(shape, seed=0)
+    i = result.info.identity
+    assert i.isometry < i.threshold <= 0.85 and i.wider_radius == pytest.approx(0.1)
+    assert i.wider_kept and i.wider_distortion < 0.9 * i.distortion, i
+    assert evaluate.score_map(result.symmetry_map(), shape, truth).within(0.10) > 0.8
 
 
 def test_paper_preset():

@@ -278,6 +278,7 @@ def _summary(result: Result, out: Path) -> dict:
         "bp": {k: getattr(info.bp, k) for k in ("backend", "iterations", "converged", "max_change")},
         "files": [f for f in Result.FILES if (out / f).is_file()],
         "global_confidence": _global_confidence(result, out),
+        "identity": None if info.identity is None else dataclasses.asdict(info.identity),
     }
 
 
@@ -293,6 +294,13 @@ def _print_summary(s: dict) -> None:
     )
     if "symmetries" in s:
         print(f"symmetries: {s['symmetries']} found (symmetries.json)")
+    if (i := s.get("identity") or {}).get("wider_radius") is not None:
+        second = "none" if i["wider_distortion"] is None else f"{i['wider_distortion']:.4f}"
+        print(
+            f"global symmetry by the reflection test alone: BP again at trivial radius {i['wider_radius']:.3g}, "
+            f"{'its' if i['wider_kept'] else 'the first'} map kept (mean local distortion {second}, first "
+            f"{i['distortion']:.4f})"
+        )
     if s.get("global_confidence") is not None:
         print(
             f"global symmetry: {s['global_confidence']:.2f} of the vertices expected within 0.05 of their true image "

@@ -40,14 +40,12 @@ MAP_MARGIN = 0.1
 #: Radius (sqrt(area) units) of the marginal mass that chooses, per source sample's cell,
 #: between seeded ZoomOut's plain and involutive fits (:func:`intrinsym.globalmap.zoomout_map`).
 CELL_RADIUS = 0.05
-#: The involutive ZoomOut fit's image of a vertex is kept only within this distance
-#: (sqrt(area) units) of the extraction's image; beyond it, the plain fit's
-#: (:func:`intrinsym.globalmap.zoomout_map`).
+#: The involutive ZoomOut fit's image of a vertex is kept only within this distance (sqrt(area) units) of
+#: the extraction's image; beyond it, the plain fit's (:func:`intrinsym.globalmap.zoomout_map`).
 GUIDE_TOLERANCE = 0.05
-#: A vertex whose global-map image keeps its geodesic distances to the anchors of
-#: ``refine_anchors`` within this many target spacings (root mean square, and to the
-#: nearest anchor) keeps it (:func:`intrinsym.refine.trilaterate`; measured in
-#: docs/results.md).
+#: A vertex whose global-map image keeps its geodesic distances to the anchors of ``refine_anchors``
+#: within this many target spacings (root mean square, and to the nearest anchor) keeps it
+#: (:func:`intrinsym.refine.trilaterate`; measured in docs/results.md).
 REFINE_TOLERANCE = 2.0
 #: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
 REFINE_REACH = 0.3
@@ -265,6 +263,13 @@ class Params:
         "trivial match",
         self_match=True,
     )
+    unsure_radius: float = _p(
+        1.25,
+        "BP again at --trivial-radius times this when the global symmetry passes --reflection-threshold but not "
+        "--isometry-threshold; the global map of lower mean local distortion is kept (1: off)",
+        "trivial match",
+        self_match=True,
+    )
     reflection_threshold: float = _p(
         0.55,
         "share of source samples at which BP's argmax acts as a reflection (applied twice, it returns them "
@@ -382,6 +387,7 @@ class Params:
             ),
             (not 0 <= self.isometry_threshold <= 1, "isometry_threshold must lie in [0, 1]"),
             (not 0 <= self.reflection_threshold <= 1, "reflection_threshold must lie in [0, 1]"),
+            (not self.unsure_radius >= 1, "unsure_radius must be at least 1"),
             (not 0 <= self.fallback_mass <= 1, "fallback_mass must lie in [0, 1]"),
             (not self.mass_radius > 0, "mass_radius must be positive"),
             (self.passes is not None and self.passes < 1, "passes must be at least 1"),

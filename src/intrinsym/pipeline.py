@@ -22,7 +22,7 @@ import numpy as np
 from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
 from .extract import Extraction, consistency, extract_from_support
-from .globalmap import choose_global_map, local_map_distortion
+from .globalmap import GlobalMap, choose_global_map, local_map_distortion
 from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, RETURN_RADIUS, WORK_PER_SAMPLE, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
 from .reflection import reflection
@@ -308,6 +308,52 @@ def _bp_stats(runs: list[bp.BPResult]) -> BPStats:
     )
 
 
+def _global_map(
+    src: Surface,
+    tgt: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
+    support: Support,
+    edges: np.ndarray,
+    spectra: tuple | None,
+    t_spacing: float,
+    source_vertex: np.ndarray,
+    self_match: bool,
+    clock: _Clock,
+    outcome: BPOutcome,
+    p: Params,
+) -> tuple[Extraction, GlobalMap | None, np.ndarray | None]:
+    """The symmetries of a BP outcome, and (self-matching, when one is global) the global
+    map :func:`choose_global_map` chooses with its local distortion."""
+    extraction = extract_symmetries(src, tgt, ps, pt, edges, support, outcome, p)
+    clock.lap("extract")
+    if not self_match or extraction.global_symmetry is None:
+        return extraction, None, None
+    fit = (
+        edges,
+        src.to_input(src.shape.vertices[ps]),
+        tgt.to_input(tgt.shape.vertices[pt]),
+        tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
+    )
+    chosen = choose_global_map(
+        src,
+        ps,
+        pt,
+        source_vertex,
+        outcome.marginals,
+        extraction.global_symmetry,
+        support,
+        None if spectra is None else spectra[0],
+        fit,
+        t_spacing,
+        p,
+        device=outcome.runs[0].backend,  # the GPU that ran BP runs the dense searches
+    )
+    map_distortion = local_map_distortion(src, chosen.vertex_map)
+    clock.lap("global_map")
+    return extraction, chosen, map_distortion
+
+
 def _solve(
     src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params, clock: _Clock, self_match: bool, header: dict
 ) -> Result:
@@ -326,40 +372,45 @@ def _solve(
     mrf = model.MRF(phi.astype(np.float32), edges, edge_length, pair.targets, pair.lam, p.rho)
     clock.lap("unary")
     outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
+    unsure = False
     if outcome.identity is not None and p.trivial_weight == "auto":
         identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, src, ps, pt)
         if identity.weight > 0:
             outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
         outcome = dataclasses.replace(outcome, identity=identity)
+        unsure = identity.weight == 0 and identity.isometry is not None and identity.isometry < p.isometry_threshold
     clock.lap("bp")
     support = extraction_support(src, tgt, ps, pt, pair, edge_length, self_match)
-    extraction = extract_symmetries(src, tgt, ps, pt, edges, support, outcome, p)
-    clock.lap("extract")
     source_vertex = src.nearest_input_vertex(src.shape.vertices[ps])
-    chosen, map_distortion = None, None
-    if self_match and extraction.global_symmetry is not None:
-        fit = (
-            edges,
-            src.to_input(src.shape.vertices[ps]),
-            tgt.to_input(tgt.shape.vertices[pt]),
-            tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
+    models = (src, tgt, ps, pt, support, edges, spectra, t_spacing, source_vertex, self_match, clock)
+    extraction, chosen, map_distortion = _global_map(*models, outcome, p)
+    if unsure and map_distortion is not None and p.unsure_radius > 1:
+        # The global symmetry rests on the reflection test alone: a slide of the identity
+        # just past the trivial radius can pass it too. BP again with a wider radius, and
+        # keep the more isometric global map (the model's own premise).
+        wider = dataclasses.replace(p, trivial_radius=p.trivial_radius * p.unsure_radius)
+        near_wider = unary.near_targets(src, ps, pt, wider.trivial_radius)
+        second = solve_bp(mrf, phi, floor, near_wider, wider, self_match, n_passes, clock.progress)
+        decision = decide_identity(edges, edge_length, pair, second, wider, t_spacing, src, ps, pt)
+        clock.lap("bp")
+        now = float(np.nanmean(map_distortion))
+        then: float | None = None
+        kept = False
+        if decision.weight == 0:
+            found = _global_map(*models, second, wider)
+            if found[2] is not None:
+                then = float(np.nanmean(found[2]))
+                kept = then < now
+                if kept:
+                    outcome, (extraction, chosen, map_distortion) = second, found
+        record = dataclasses.replace(
+            decision if kept else identity,
+            wider_radius=wider.trivial_radius,
+            distortion=now,
+            wider_distortion=then,
+            wider_kept=kept,
         )
-        chosen = choose_global_map(
-            src,
-            ps,
-            pt,
-            source_vertex,
-            outcome.marginals,
-            extraction.global_symmetry,
-            support,
-            None if spectra is None else spectra[0],
-            fit,
-            t_spacing,
-            p,
-            device=outcome.runs[0].backend,  # the GPU that ran BP runs the dense searches
-        )
-        map_distortion = local_map_distortion(src, chosen.vertex_map)
-        clock.lap("global_map")
+        outcome = dataclasses.replace(outcome, identity=record)
     sizes = Sizes(
         source=len(ps),
         target=len(pt),

@@ -149,6 +149,14 @@ class IdentityDecision:
         acted as a reflection (:func:`intrinsym.reflection.reflection`).
     reflection_threshold : float or None
         The threshold it was compared with.
+    wider_radius : float or None
+        When the global symmetry was kept by the reflection test alone: the trivial radius
+        of the second BP (``unsure_radius`` times ``trivial_radius``).
+    distortion, wider_distortion : float or None
+        The mean local distortion of the two runs' global maps (sqrt(area) units; None
+        where a run gave none).
+    wider_kept : bool or None
+        Whether the second run's result was kept (its map the less distorted).
     """
 
     weight: float
@@ -157,6 +165,10 @@ class IdentityDecision:
     removed_iterations: int | None = None
     reflection: float | None = None
     reflection_threshold: float | None = None
+    wider_radius: float | None = None
+    distortion: float | None = None
+    wider_distortion: float | None = None
+    wider_kept: bool | None = None
 
 
 @dataclass(frozen=True)
