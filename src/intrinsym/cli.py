@@ -38,7 +38,7 @@ from .errors import InputError, IntrinsymError, ParameterError
 from .io import load
 from .progress import BPIteration, ProgressEvent
 from .records import records
-from .result import Result
+from .result import Result, saved_global_confidence
 
 
 def _number_or(words: tuple[str, ...], kind: type) -> Callable[[str], Any]:
@@ -260,14 +260,6 @@ def _overrides(args: argparse.Namespace) -> dict:
     return {f.name: getattr(args, f.name) for f in params.describe() if getattr(args, f.name, None) is not None}
 
 
-def _global_confidence(result: Result, out: Path) -> float | None:
-    """The mean of the symmetry_confidence.npy just written, None without a global symmetry."""
-    path = out / "symmetry_confidence.npy"
-    if result.global_symmetry is None or not path.is_file():
-        return None
-    return float(np.load(path).mean())
-
-
 def _summary(result: Result, out: Path) -> dict:
     info = result.info
     return {
@@ -277,7 +269,7 @@ def _summary(result: Result, out: Path) -> dict:
         "seconds": {k: round(v, 3) for k, v in info.seconds.items()},
         "bp": {k: getattr(info.bp, k) for k in ("backend", "iterations", "converged", "max_change")},
         "files": [f for f in Result.FILES if (out / f).is_file()],
-        "global_confidence": _global_confidence(result, out),
+        "global_confidence": saved_global_confidence(out, result.global_symmetry is not None),
         "identity": None if info.identity is None else dataclasses.asdict(info.identity),
     }
 

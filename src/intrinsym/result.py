@@ -326,3 +326,10 @@ class Result:
             pass_marginals=pass_marginals,
             map_distortion=map_distortion,
         )
+
+
+def saved_global_confidence(out_dir: str | os.PathLike, has_global: bool) -> float | None:
+    """The global confidence of a saved result: the mean of its ``symmetry_confidence.npy``;
+    None without a global symmetry or without the file (results of earlier versions)."""
+    path = Path(out_dir) / "symmetry_confidence.npy"
+    return float(np.load(path).mean()) if has_global and path.is_file() else None

@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import evaluate
 from ..io import load
-from ..result import Result
+from ..result import Result, saved_global_confidence
 from ..runinfo import RunInfo
 from .items import Item
 
@@ -152,9 +152,7 @@ def row_of_folder(item: Item, key: str, folder: Path, status: str = "skipped") -
     scores_file = folder / "scores.json"
     scores = json.loads(scores_file.read_text()) if scores_file.is_file() else None
     found = [(str(r["kind"]), float(r["score"])) for r in listed]
-    conf_file = folder / "symmetry_confidence.npy"
-    has_global = any(kind == "global" for kind, _ in found) and conf_file.is_file()
-    conf = float(np.load(conf_file).mean()) if has_global else None
+    conf = saved_global_confidence(folder, any(kind == "global" for kind, _ in found))
     return result_row(item, key, status, RunInfo.from_dict(run), found, vertices, scores, conf)
 
 
