@@ -8,7 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import settings
 from scipy.spatial import cKDTree
+
+# Property tests draw the same examples on every run (a test that fails, fails again
+# on a fresh clone); HYPOTHESIS_PROFILE=explore draws new ones, to look for new failures.
+settings.register_profile("reproducible", derandomize=True, database=None)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
 
 #: The research data folder: $INTRINSYM_DATA, else the development checkout's default beside the repository.
 DATA = Path(os.environ.get("INTRINSYM_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")

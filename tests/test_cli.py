@@ -112,6 +112,7 @@ def test_evaluate_command(tmp_path, mirror):
         ("OFF\n4 1 0\n0 0 0\n1 0 0\n", "short.off", "truncated"),
         ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", "word.off", "numeric"),
         ("hello", "shape.foo", "unknown file type"),
+        ("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 100000000000000000000\n", "huge.off", "out of range"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_no_output(tmp_path, content, name, match):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +95,30 @@ f -2/1/1 -5/2/1 -1/3/1
     shape = load(write(tmp_path, "pyramid.obj", text))
     np.testing.assert_array_equal(shape.vertices, PYRAMID_V)
     np.testing.assert_array_equal(shape.faces, PYRAMID_F)
+
+
+def test_obj_with_latin1_comment_and_names(tmp_path):
+    text = (
+        "# Würfel, exportiert für den Test\nmtllib würfel.mtl\no Würfel\ng Fläche\nusemtl Grün\n"
+        + "".join(f"v {x} {y} {z}\n" for x, y, z in PYRAMID_V)
+        + "f 1 4 3 2 # Böden\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\n"
+    )
+    path = tmp_path / "würfel.obj"
+    path.write_bytes(text.encode("latin-1"))
+    shape = load(path)
+    np.testing.assert_array_equal(shape.vertices, PYRAMID_V)
+    np.testing.assert_array_equal(shape.faces, PYRAMID_F)
+    # the same bytes where geometry is read are refused, naming the line
+    path.write_bytes(text.replace("v 1.0 0.0 0.0", "v 1.0 0.0 0.0\xb0").encode("latin-1"))
+    raises_one_line(path, "line 7: not a text file")
+    path.write_bytes(("vé 0 0 0\n" + text).encode("latin-1"))
+    raises_one_line(path, "line 1: not a text file")
+    off = "OFF # Würfel\n5 5 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in PYRAMID_V)
+    off += "4 0 3 2 1\n3 0 1 4\n3 1 2 4\n3 2 3 4\n3 3 0 4\n"
+    (tmp_path / "latin.off").write_bytes(off.encode("latin-1"))
+    np.testing.assert_array_equal(load(tmp_path / "latin.off").faces, PYRAMID_F)
+    (tmp_path / "latin.off").write_bytes(off.replace("1.0 0.0 0.0", "1.0 0.0 0.0°").encode("latin-1"))
+    raises_one_line(tmp_path / "latin.off", "line 4: not a text file")
 
 
 def test_obj_with_only_vertices_is_a_point_cloud(tmp_path):
@@ -340,6 +365,21 @@ def test_corrupt_npy(tmp_path):
             "OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n2 0 1\n",
             "line 7: a face needs at least 3 vertices",
         ),
+        (  # beyond int64: parsed line by line, not by NumPy
+            "huge.off",
+            "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 100000000000000000000\n",
+            "line 8: face index 100000000000000000000 out of range",
+        ),
+        (
+            "huge.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 100000000000000000000\n",
+            "line 6: face index 100000000000000000000 out of range",
+        ),
+        (
+            "huge_relative.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 -100000000000000000000\n",
+            "line 6: relative face index points before the first vertex",
+        ),
     ],
 )
 def test_bad_face_indices(tmp_path, name, text, match):
@@ -354,6 +394,62 @@ def test_face_index_out_of_range_in_ply(tmp_path):
     lines[-1] = "3 7 5 99"
     path.write_text("\n".join(lines) + "\n")
     raises_one_line(path, "face index 99 out of range")
+
+
+def write_binary_ply(path: Path, vertices: np.ndarray, polygons: list, byte_order: str = "<") -> bytes:
+    """Write a binary PLY as Blender does (float x y z, uchar r g b, one uint index list per
+    face, whatever its number of corners); returns the data after the header."""
+    endian = "little" if byte_order == "<" else "big"
+    header = (
+        f"ply\nformat binary_{endian}_endian 1.0\ncomment written by a test\nelement vertex {len(vertices)}\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+        f"element face {len(polygons)}\nproperty list uchar uint vertex_indices\nend_header\n"
+    )
+    rows = np.zeros(len(vertices), dtype=[("xyz", f"{byte_order}f4", 3), ("rgb", "u1", 3)])
+    rows["xyz"], rows["rgb"] = vertices, 200
+    faces = b"".join(struct.pack(f"{byte_order}B{len(p)}I", len(p), *p) for p in polygons)
+    data = rows.tobytes() + faces
+    path.write_bytes(header.encode() + data)
+    return data
+
+
+@pytest.mark.parametrize("byte_order", ["<", ">"])
+def test_binary_ply_with_quads_and_triangles(tmp_path, byte_order):
+    polygons = [[0, 3, 2, 1], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
+    write_binary_ply(tmp_path / "pyramid.ply", PYRAMID_V, polygons, byte_order)
+    shape = load(tmp_path / "pyramid.ply")
+    np.testing.assert_array_equal(shape.vertices, PYRAMID_V)
+    np.testing.assert_array_equal(shape.faces, PYRAMID_F)  # fan-triangulated in file order, as OFF and OBJ
+    lines = [" ".join(map(str, v)) + " 200 200 200" for v in PYRAMID_V] + [
+        f"{len(p)} " + " ".join(map(str, p)) for p in polygons
+    ]
+    ascii_header = (tmp_path / "pyramid.ply").read_bytes().split(b"end_header")[0].decode()
+    ascii_header = ascii_header.replace(f"binary_{'little' if byte_order == '<' else 'big'}_endian", "ascii")
+    ascii_shape = load(write(tmp_path, "ascii.ply", ascii_header + "end_header\n" + "\n".join(lines) + "\n"))
+    assert sorted(map(sorted, shape.faces.tolist())) == sorted(map(sorted, ascii_shape.faces.tolist()))
+
+
+def test_binary_ply_prism_with_255_gon_caps(tmp_path):
+    n = 255
+    angle = 2 * np.pi * np.arange(n) / n
+    ring = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(n)])
+    vertices = np.vstack([ring, ring + [0, 0, 1]])
+    sides = [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    caps = [list(range(n))[::-1], list(range(n, 2 * n))]
+    data = write_binary_ply(tmp_path / "prism.ply", vertices, sides + caps)
+    shape = load(tmp_path / "prism.ply")
+    assert shape.faces.shape == (2 * n + 2 * (n - 2), 3)
+    cleaned, _ = clean(shape)
+    side = n * 2 * np.sin(np.pi / n)
+    cap = n * np.sin(2 * np.pi / n) / 2
+    assert surface_area(cleaned) == pytest.approx(side + 2 * cap, rel=1e-5)
+    # cut inside a face's list, or with bytes to spare: a one-line error
+    header = (tmp_path / "prism.ply").read_bytes()[: -len(data)]
+    (tmp_path / "cut.ply").write_bytes(header + data[:-100])
+    raises_one_line(tmp_path / "cut.ply", "truncated or corrupt PLY file")
+    (tmp_path / "long.ply").write_bytes(header + data + b"\0\0\0")
+    raises_one_line(tmp_path / "long.ply", "truncated or corrupt PLY file: 3 bytes after the data")
 
 
 def test_fewer_than_four_points(tmp_path):

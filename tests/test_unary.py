@@ -220,3 +220,17 @@ def test_the_weighted_identity_keeps_off_limb_points_home_and_limbs_on_each_othe
     # every off-limb sample removed, none weighted; 0.76 weighted without that rule)
     assert removed.extraction.global_index >= 0 and weighted.extraction.global_index == -1
     assert body_removed > 0.9 and body < 0.1, (body_removed, body)
+
+
+def test_a_constant_descriptor_gives_finite_positive_potentials():
+    # On a thin needle (a cylinder of radius 1e-6 and length 1, 16 sections) every spin
+    # image along the shaft is the same: the calibration distances are all 0, and the
+    # scale's floor once squared to 0, making the potentials 0 / 0 = NaN.
+    zero = np.zeros((5, 8))
+    near = np.tile(np.arange(3), (5, 1))
+    for scale in (unary.descriptor_scale(zero, near=near), unary.descriptor_scale(zero, k=3)):
+        assert scale > 0
+        distances = np.where(np.arange(8) < 4, 0.0, 0.3)[None, :].repeat(5, axis=0)
+        phi = unary.calibrated_potential([distances, zero], [scale, scale])
+        assert np.isfinite(phi).all() and (phi > 0).all()
+        np.testing.assert_array_equal(phi, np.where(distances == 0, 1.0, 1e-3))

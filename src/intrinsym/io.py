@@ -9,8 +9,9 @@ Supported formats
 -----------------
 ``.off`` and ``.obj`` (own parsers in :mod:`intrinsym.io_text`, polygons
 fan-triangulated), ``.ply`` and ``.stl`` (ASCII and binary, read with trimesh and
-validated here; a PLY file without faces is a point cloud), ``.xyz`` (one point per
-line) and ``.npy`` (an ``(N, >=3)`` float array, a point cloud).
+validated here, binary PLY by :mod:`intrinsym.io_ply`; a PLY file without faces is a
+point cloud), ``.xyz`` (one point per line) and ``.npy`` (an ``(N, >=3)`` float array,
+a point cloud).
 
 Units are whatever the file uses; nothing is rescaled.
 """
@@ -24,6 +25,7 @@ import warnings
 
 import numpy as np
 
+from . import io_ply
 from .errors import InputError, path_label
 from .io_text import is_float, quote_token, read_obj, read_off, read_xyz
 from .resources import available_memory, format_bytes
@@ -95,40 +97,6 @@ def _one_line(err: BaseException) -> str:
 # PLY and STL, read with trimesh (imported where used: it costs 0.2 s, which an OFF or OBJ
 # input need not pay)
 # ----------------------------------------------------------------------------
-
-
-def _ply_header(path: str, label: str) -> tuple[str, dict[str, int], int]:
-    """Read a PLY header.
-
-    Returns
-    -------
-    format : str
-        ``"ascii"``, ``"binary_little_endian"`` or ``"binary_big_endian"``.
-    counts : dict
-        Declared element counts, e.g. ``{"vertex": 8, "face": 12}``.
-    header_lines : int
-        Number of lines up to and including ``end_header``.
-    """
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(1 << 20)
-    except OSError as err:
-        raise InputError(f"{label}: cannot read file ({err.strerror or err})") from None
-    end = head.find(b"end_header")
-    if not head.startswith(b"ply") or end < 0:
-        raise InputError(f"{label}: not a PLY file (missing 'ply' magic or 'end_header')")
-    lines = head[:end].decode("ascii", errors="replace").splitlines()
-    fmt = ""
-    counts: dict[str, int] = {}
-    for line in lines:
-        tokens = line.split()
-        if len(tokens) >= 2 and tokens[0] == "format":
-            fmt = tokens[1]
-        elif len(tokens) >= 3 and tokens[0] == "element":
-            if not tokens[2].isdigit():
-                raise InputError(f"{label}: corrupt PLY header: bad element count {quote_token(tokens[2])}")
-            counts[tokens[1]] = int(tokens[2])
-    return fmt, counts, len(lines) + 1
 
 
 def _first_non_numeric(text_lines: list[str], start: int, keyword: str | None) -> tuple[int, str] | None:
@@ -216,15 +184,21 @@ def _trimesh_load(path: str, file_type: str) -> object:
 
 
 def _read_ply(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
-    """Read a PLY file (ASCII or binary) with trimesh; no faces means a point cloud."""
-    fmt, counts, header_lines = _ply_header(path, label)
+    """Read a PLY file; no faces means a point cloud.
+
+    ASCII with trimesh, binary with :func:`intrinsym.io_ply.read_binary` (trimesh's
+    binary reader needs all faces to have as many corners as the first).
+    """
+    header = io_ply.read_header(path, label)
+    if header.format.startswith("binary"):
+        return io_ply.read_binary(path, label, header)
     try:
         loaded = _trimesh_load(path, "ply")
     except Exception as err:  # trimesh raises many types on malformed input
-        ascii_start = header_lines if fmt == "ascii" else None
+        ascii_start = header.lines if header.format == "ascii" else None
         raise _trimesh_failure(path, label, "PLY", err, ascii_start) from None
     vertices, faces = _trimesh_arrays(loaded, label, "PLY")
-    declared_v, declared_f = counts.get("vertex", 0), counts.get("face", 0)
+    declared_v, declared_f = header.count("vertex"), header.count("face")
     if len(vertices) != declared_v:
         raise InputError(
             f"{label}: truncated or corrupt PLY file: header declares {declared_v} vertices, found {len(vertices)}"

@@ -5,7 +5,8 @@ Each reader returns the vertices (N, 3) float64 and the fan-triangulated faces
 validated by :func:`intrinsym.io.load`. Every problem is an
 :class:`~intrinsym.errors.InputError` naming the file and, where there is one, the
 line. Lines are parsed in C when they form a regular table, and line by line only
-to report the exact problem otherwise.
+to report the exact problem otherwise. Text is UTF-8; other bytes are accepted in
+comments (and in OBJ's names of objects, groups and materials), which carry no geometry.
 """
 
 from __future__ import annotations
@@ -29,14 +30,23 @@ def _read_bytes(path: str, label: str) -> bytes:
 
 
 def _decode(data: bytes, label: str) -> str:
-    """Decode file contents as UTF-8 text (BOM allowed), rejecting binary data."""
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise InputError(f"{label}: not a text file (undecodable byte at offset {err.start})") from None
-    if "\x00" in text:
+    """Decode file contents as UTF-8 text (BOM allowed), rejecting binary data.
+
+    Bytes that are not UTF-8 become U+FFFD rather than an error: the formats declare no
+    encoding, and a Latin-1 comment or object name carries no geometry. The parsers
+    refuse them only where they would be data (:func:`_check_decoded`).
+    """
+    if b"\x00" in data:
         raise InputError(f"{label}: not a text file (contains NUL bytes)")
-    return text
+    return data.decode("utf-8-sig", errors="replace")
+
+
+def _check_decoded(numbers: list[int], lines: list[str], label: str) -> None:
+    """Raise InputError naming the first of ``lines`` (data, comments removed) that holds
+    a byte that is not UTF-8 (U+FFFD after :func:`_decode`)."""
+    for number, line in zip(numbers, lines, strict=True):
+        if "\ufffd" in line:
+            raise InputError(f"{label}: line {number}: not a text file (bytes that are not UTF-8 in the data)")
 
 
 def _content_lines(text: str) -> tuple[list[int], list[str]]:
@@ -60,12 +70,21 @@ def _content_lines(text: str) -> tuple[list[int], list[str]]:
     return numbers, lines
 
 
-def _data_lines(path: str, label: str) -> tuple[list[int], list[str]]:
-    """:func:`_content_lines` of a text file; an :class:`InputError` when it has none."""
-    numbers, lines = _content_lines(_decode(_read_bytes(path, label), label))
+def _data_lines(path: str, label: str, all_data: bool = True) -> tuple[list[int], list[str], bool]:
+    """:func:`_content_lines` of a text file; an :class:`InputError` when it has none.
+
+    With ``all_data`` every line but comments is data, and one that holds a byte that
+    is not UTF-8 is an error. Also returns whether the file holds such bytes (for the
+    caller to check the lines it parses with :func:`_check_decoded` otherwise).
+    """
+    text = _decode(_read_bytes(path, label), label)
+    numbers, lines = _content_lines(text)
     if not lines:
         raise InputError(f"{label}: empty file (no data lines)")
-    return numbers, lines
+    undecodable = "\ufffd" in text
+    if undecodable and all_data:
+        _check_decoded(numbers, lines, label)
+    return numbers, lines, undecodable
 
 
 def quote_token(token: str) -> str:
@@ -130,12 +149,21 @@ def is_float(token: str) -> bool:
 
 
 def _fan_triangulate(polygons: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fan_triangulate` of polygons given as vertex index lists."""
+    lengths = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
+    flat = np.fromiter((i for p in polygons for i in p), dtype=np.int64, count=int(lengths.sum()))
+    return fan_triangulate(flat, lengths)
+
+
+def fan_triangulate(flat: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Fan-triangulate polygons of 3 or more vertices.
 
     Parameters
     ----------
-    polygons : list of list of int
-        P polygons given as vertex index lists.
+    flat : np.ndarray
+        (K,) int64 vertex indices of P polygons, one after the other.
+    lengths : np.ndarray
+        (P,) int64 number of vertices of each polygon, >= 3, summing to K.
 
     Returns
     -------
@@ -144,11 +172,9 @@ def _fan_triangulate(polygons: list[list[int]]) -> tuple[np.ndarray, np.ndarray]
     source : np.ndarray
         (T,) int64 index of the polygon each triangle came from.
     """
-    lengths = np.fromiter((len(p) for p in polygons), dtype=np.int64, count=len(polygons))
-    flat = np.fromiter((i for p in polygons for i in p), dtype=np.int64, count=int(lengths.sum()))
     starts = np.cumsum(lengths) - lengths
     n_tris = lengths - 2
-    source = np.repeat(np.arange(len(polygons), dtype=np.int64), n_tris)
+    source = np.repeat(np.arange(len(lengths), dtype=np.int64), n_tris)
     first_tri = np.cumsum(n_tris) - n_tris
     j = np.arange(source.size, dtype=np.int64) - first_tri[source] + 1
     base = starts[source]
@@ -198,11 +224,16 @@ def _check_indices(
     if not bad.any():
         return
     t, c = np.argwhere(bad)[0]
-    index, line = int(triangles[t, c]), numbers[source[t]]
+    raise _index_error(label, numbers[source[t]], int(triangles[t, c]), n_vertices, one_based)
+
+
+def _index_error(label: str, line: int, index: int, n_vertices: int, one_based: bool) -> InputError:
+    """The error for the 0-based face ``index`` outside [0, n_vertices) on ``line``
+    (see :func:`_check_indices`)."""
     if one_based and index < 0:
-        raise InputError(f"{label}: line {line}: relative face index points before the first vertex")
+        return InputError(f"{label}: line {line}: relative face index points before the first vertex")
     shown = index + 1 if one_based else index
-    raise InputError(f"{label}: line {line}: face index {shown} out of range (the file has {n_vertices} vertices)")
+    return InputError(f"{label}: line {line}: face index {shown} out of range (the file has {n_vertices} vertices)")
 
 
 def _non_integer_face(label: str, number: int, token: str) -> InputError:
@@ -210,10 +241,12 @@ def _non_integer_face(label: str, number: int, token: str) -> InputError:
     return InputError(f"{label}: line {number}: non-integer value {quote_token(token)} where a face index is expected")
 
 
-def _off_faces(numbers: list[int], lines: list[str], label: str) -> tuple[np.ndarray, np.ndarray]:
+def _off_faces(numbers: list[int], lines: list[str], n_vertices: int, label: str) -> tuple[np.ndarray, np.ndarray]:
     """Parse OFF face lines ``k i_1 ... i_k [colour]`` into fan-triangulated (T, 3) faces.
 
-    Also returns the (T,) index of the line each triangle came from.
+    Also returns the (T,) index of the line each triangle came from. Indices outside
+    [0, n_vertices) are errors here when the lines are parsed one by one (they may
+    not fit in int64), else by :func:`_check_indices`.
     """
     table = _fast_table(lines, np.int64)
     if table is not None and table.shape[1] >= 4:
@@ -234,9 +267,12 @@ def _off_faces(numbers: list[int], lines: list[str], label: str) -> tuple[np.nda
         polygon = []
         for token in tokens[1 : k + 1]:
             try:
-                polygon.append(int(token))
+                index = int(token)
             except ValueError:
                 raise _non_integer_face(label, number, token) from None
+            if not 0 <= index < n_vertices:
+                raise _index_error(label, number, index, n_vertices, one_based=False)
+            polygon.append(index)
         polygons.append(polygon)
     return _fan_triangulate(polygons)
 
@@ -264,7 +300,7 @@ def read_off(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     InputError
         For any problem with the file, naming the line where there is one.
     """
-    numbers, lines = _data_lines(path, label)
+    numbers, lines, _ = _data_lines(path, label)
     tokens = lines[0].split()
     match = re.fullmatch(r"(ST)?C?N?(4?n?)OFF(\d*)", tokens[0])
     if match is None:
@@ -303,17 +339,19 @@ def read_off(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     if len(lines) < stop + n_faces:
         raise InputError(f"{label}: truncated file: header declares {n_faces} faces, found {len(lines) - stop}")
     face_numbers = numbers[stop : stop + n_faces]
-    triangles, source = _off_faces(face_numbers, lines[stop : stop + n_faces], label)
+    triangles, source = _off_faces(face_numbers, lines[stop : stop + n_faces], n_vertices, label)
     _check_indices(triangles, source, face_numbers, n_vertices, label, one_based=False)
     return vertices, triangles
 
 
-def _obj_faces(numbers: list[int], lines: list[str], n_before: np.ndarray, label: str) -> tuple[np.ndarray, np.ndarray]:
+def _obj_faces(
+    numbers: list[int], lines: list[str], n_before: np.ndarray, n_vertices: int, label: str
+) -> tuple[np.ndarray, np.ndarray]:
     """Parse OBJ ``f`` records (keyword removed) into fan-triangulated 0-based (T, 3) faces.
 
     ``n_before[i]`` is the number of vertices defined before face line i (for
     negative, relative indices). Also returns the (T,) face-line index of each
-    triangle.
+    triangle. Indices outside the ``n_vertices`` are errors as in :func:`_off_faces`.
     """
     stripped = re.sub(r"/\S*", "", "\n".join(lines)).split("\n")
     table = _fast_table(stripped, np.int64)
@@ -330,7 +368,10 @@ def _obj_faces(numbers: list[int], lines: list[str], n_before: np.ndarray, label
                 raise _non_integer_face(label, number, head) from None
             if index == 0:
                 raise InputError(f"{label}: line {number}: face index 0 is invalid (OBJ indices start at 1)")
-            polygon.append(index - 1 if index > 0 else n_so_far + index)
+            index = index - 1 if index > 0 else n_so_far + index
+            if not 0 <= index < n_vertices:
+                raise _index_error(label, number, index, n_vertices, one_based=True)
+            polygon.append(index)
         if len(polygon) < 3:
             raise InputError(f"{label}: line {number}: a face needs at least 3 vertices, found {len(polygon)}")
         polygons.append(polygon)
@@ -342,6 +383,8 @@ def read_obj(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
 
     Face corners may be ``i``, ``i/t``, ``i/t/n`` or ``i//n``; negative indices
     are relative to the vertices read so far. Polygons are fan-triangulated.
+    OBJ declares no encoding: bytes that are not UTF-8 (a Latin-1 comment or object
+    name) are accepted outside the keywords and the ``v`` and ``f`` records.
 
     Parameters
     ----------
@@ -363,11 +406,13 @@ def read_obj(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     InputError
         For any problem with the file, naming the line where there is one.
     """
-    numbers, lines = _data_lines(path, label)
+    numbers, lines, undecodable = _data_lines(path, label, all_data=False)
     stripped = [line.lstrip() for line in lines]
     keys = [line.split(None, 1)[0] for line in stripped]
     v_rows = [i for i, key in enumerate(keys) if key == "v"]
     f_rows = [i for i, key in enumerate(keys) if key == "f"]
+    if undecodable:  # allowed in the names of objects, groups, materials..., not in keys or data
+        _check_decoded(numbers, [line if key in ("v", "f") else key for line, key in zip(stripped, keys)], label)
     if not v_rows:
         raise InputError(f"{label}: no vertices ('v' lines) found")
     vertices = _parse_points([numbers[i] for i in v_rows], [stripped[i][1:] for i in v_rows], label, "vertex")
@@ -375,7 +420,7 @@ def read_obj(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
         return vertices, None
     face_numbers = [numbers[i] for i in f_rows]
     n_before = np.searchsorted(np.asarray(v_rows), np.asarray(f_rows))
-    triangles, source = _obj_faces(face_numbers, [stripped[i][1:] for i in f_rows], n_before, label)
+    triangles, source = _obj_faces(face_numbers, [stripped[i][1:] for i in f_rows], n_before, len(vertices), label)
     _check_indices(triangles, source, face_numbers, len(vertices), label, one_based=True)
     return vertices, triangles
 
@@ -403,5 +448,5 @@ def read_xyz(path: str, label: str) -> tuple[np.ndarray, None]:
     InputError
         For any problem with the file, naming the line where there is one.
     """
-    numbers, lines = _data_lines(path, label)
+    numbers, lines, _ = _data_lines(path, label)
     return _parse_points(numbers, lines, label, "point"), None

@@ -21,6 +21,11 @@ from .surface import Surface, sample
 #: Laplace-Beltrami eigenvalues (K,) and eigenfunctions (N, K) of a surface.
 Spectrum = tuple[np.ndarray, np.ndarray]
 
+#: Smallest descriptor scale: the square root of the smallest normal float, so that
+#: sigma**2 in :func:`calibrated_potential` stays positive (a constant descriptor, as on
+#: a thin needle, has scale 0, and 0 / 0 would make the potentials NaN).
+SMALLEST_SCALE = float(np.sqrt(np.finfo(np.float64).tiny))
+
 
 def nmi_potential(similarity: np.ndarray, gamma: float) -> np.ndarray:
     """Robust unary of Eq. 5 on the similarity NMI' = NMI - 1 in [0, 1].
@@ -69,7 +74,7 @@ def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None =
 
     Returns
     -------
-    float, > 0 (a tiny positive number when the descriptor is constant).
+    float, >= :data:`SMALLEST_SCALE` (equal to it when the descriptor is constant).
     """
     d = np.asarray(distance, dtype=np.float64)
     if near is not None:
@@ -80,7 +85,7 @@ def descriptor_scale(distance: np.ndarray, k: int = 7, near: np.ndarray | None =
         if not 1 <= k <= d.shape[1]:
             raise ValueError(f"k must lie in [1, {d.shape[1]}], got {k}")
         values = np.partition(d, k - 1, axis=1)[:, :k]
-    return max(float(np.median(values)), np.finfo(np.float64).tiny)
+    return max(float(np.median(values)), SMALLEST_SCALE)
 
 
 def row_scales(distance: np.ndarray, near: np.ndarray) -> np.ndarray:
