@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 import intrinsym
-from conftest import PYRAMID_F, PYRAMID_V, shared, sphere_points
+from conftest import PYRAMID_F, PYRAMID_V, mirror_shape, shared, sphere_points
 from intrinsym.errors import InputError
 from intrinsym.io import load
 from intrinsym.shape import clean, surface_area
@@ -430,6 +430,15 @@ def test_binary_ply_with_quads_and_triangles(tmp_path, byte_order):
     assert sorted(map(sorted, shape.faces.tolist())) == sorted(map(sorted, ascii_shape.faces.tolist()))
 
 
+def test_binary_ply_whose_face_sizes_add_up_is_read_row_by_row(tmp_path):
+    # a quad, a triangle and a pentagon take as many bytes as three quads: trimesh read
+    # such a file as three quads, with indices made of the neighbours' bytes
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0], [3, 0.5, 0]])
+    write_binary_ply(tmp_path / "mixed.ply", vertices, [[0, 1, 2, 3], [1, 4, 2], [4, 6, 5, 2, 1]])
+    faces = load(tmp_path / "mixed.ply").faces
+    np.testing.assert_array_equal(faces, [[0, 1, 2], [0, 2, 3], [1, 4, 2], [4, 6, 5], [4, 5, 2], [4, 2, 1]])
+
+
 def test_binary_ply_prism_with_255_gon_caps(tmp_path):
     n = 255
     angle = 2 * np.pi * np.arange(n) / n
@@ -502,3 +511,32 @@ def test_off_with_more_faces_than_its_header_declares_is_an_error(tmp_path):
     path.write_text("OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
     with pytest.raises(InputError, match="header declares 3 vertices and 0 faces"):
         intrinsym.load(path)
+
+
+# ---------------------------------------------------------------------------
+# vertex order of the results
+# ---------------------------------------------------------------------------
+
+
+def test_a_result_indexes_the_vertices_in_file_order(tmp_path):
+    # an OBJ whose every face corner has its own texture coordinate: trimesh splits such
+    # vertices unless asked to keep the file's order, as with the shipped spot.obj
+    v, f, sym = mirror_shape()
+    corners = "".join(f"vt {i / (3 * len(f))} 0.5\n" for i in range(3 * len(f)))
+    faces = "".join(f"f {a + 1}/{3 * i + 1} {b + 1}/{3 * i + 2} {c + 1}/{3 * i + 3}\n" for i, (a, b, c) in enumerate(f))
+    path = write(tmp_path, "bent.obj", "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in v.tolist()) + corners + faces)
+    out = tmp_path / "out"
+    params = intrinsym.make_params(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
+    intrinsym.detect(path, params).save(out)
+    image = np.load(out / "symmetry_map.npy")
+    assert (image >= 0).all()
+    for vertices in (
+        np.asarray(trimesh.load(path, process=False, maintain_order=True).vertices),
+        intrinsym.load(path).vertices,
+    ):
+        assert vertices.shape == v.shape
+        np.testing.assert_allclose(vertices, v)
+        # the map sends every vertex of the file to (near) its mirror image
+        assert np.linalg.norm(vertices[image] - vertices * [-1, 1, 1], axis=1).mean() < 0.02
+    assert np.mean(image == sym) > 0.9
+    assert len(trimesh.load(path, process=False).vertices) != len(image)  # trimesh's default order differs

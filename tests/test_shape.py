@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+import intrinsym
 from conftest import PYRAMID_F, PYRAMID_V, mirror_shape, sphere_points
 from intrinsym.errors import InputError
 from intrinsym.shape import Shape, clean, from_arrays, orient_faces, surface_area, vertex_areas, vertex_normals
@@ -291,3 +292,32 @@ def test_speed_of_normals_and_clean():
     cleaned, _ = clean(soup)
     assert time.perf_counter() - start < 2.0
     assert len(cleaned.vertices) == len(sphere.vertices)
+
+
+# ---------------------------------------------------------------------------
+# arrays as input
+# ---------------------------------------------------------------------------
+
+
+def test_detect_reads_an_n_by_3_array_as_a_point_cloud():
+    v, _, sym = mirror_shape()
+    result = intrinsym.detect(v, intrinsym.make_params(n_source=30, n_target=300, spin_cloud=5000, iterations=5))
+    image = result.symmetry_map()
+    assert image.shape == (len(v),)  # in the array's row order
+    assert np.mean(image == sym) > 0.9
+
+
+@pytest.mark.parametrize(
+    ("array", "match"),
+    [
+        (np.zeros((10, 2)), r"must be an \(N, 3\) array, got shape \(10, 2\)"),
+        (np.zeros((2, 5, 3)), r"must be an \(N, 3\) array, got shape \(2, 5, 3\)"),
+        (np.where(np.eye(6, 3) > 0, np.inf, 0.0), "3 vertices have NaN or infinite coordinates"),
+        (np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, np.nan]]), "NaN or infinite"),
+        (np.zeros((3, 3)), "only 3 points; at least 4"),
+    ],
+)
+def test_a_bad_array_is_a_one_line_input_error(array, match):
+    with pytest.raises(InputError, match=match) as info:
+        intrinsym.detect(array)
+    assert "\n" not in str(info.value)

@@ -264,7 +264,11 @@ def load(path: str | os.PathLike, max_bytes: int | None = None) -> Shape:
     Shape
         The validated shape with ``path`` set to the path as given. The data
         are as stored in the file (STL corners are not merged, duplicates are
-        kept); call :func:`~intrinsym.shape.clean` before processing.
+        kept); call :func:`~intrinsym.shape.clean` before processing. The
+        vertices are in file order, the order a result's vertex indices refer
+        to; ``trimesh.load(path, process=False, maintain_order=True)`` gives the
+        same order (without ``maintain_order`` trimesh splits the vertices of an
+        OBJ with per-corner texture coordinates or normals and renumbers them).
 
     Raises
     ------

@@ -502,8 +502,11 @@ def detect(
 
     Parameters
     ----------
-    shape : path, Shape, (vertices, faces) tuple or trimesh object
-        A triangle mesh or a point cloud (faces None).
+    shape : path, Shape, (vertices, faces) tuple, (N, 3) array or trimesh object
+        A triangle mesh or a point cloud (faces None; an array is one). The result's
+        vertex indices refer to its vertices in the order it gives them: a file's
+        order (:func:`~intrinsym.io.load`), a trimesh object's ``vertices``, an
+        array's rows.
     params : Params, optional
         Every parameter (default: the preset's).
     n_source, n_target, seed : int, optional

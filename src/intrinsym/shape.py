@@ -39,7 +39,8 @@ class Shape:
     Attributes
     ----------
     vertices : np.ndarray
-        (N, 3) float64 vertex coordinates, in the file's units.
+        (N, 3) float64 vertex coordinates, in the file's units and in its order
+        (:func:`~intrinsym.io.load`): a result's vertex indices index these.
     faces : np.ndarray or None
         (F, 3) int64 vertex indices of the triangles, or None for a point
         cloud.

@@ -19,9 +19,10 @@ from . import geodesics, io, sampling
 from .errors import InputError, ParameterError
 from .shape import Shape, clean, from_arrays, surface_area, vertex_normals
 
-#: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, or an object
-#: with ``vertices`` (and ``faces``), such as a trimesh.Trimesh or PointCloud.
-ShapeLike = str | os.PathLike | Shape | tuple | Any
+#: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, an (N, 3)
+#: array (a point cloud), or an object with ``vertices`` (and ``faces``), such as a
+#: trimesh.Trimesh or PointCloud. Results index its vertices in the order it gives them.
+ShapeLike = str | os.PathLike | Shape | tuple | np.ndarray | Any
 
 
 @dataclass(frozen=True)
@@ -100,13 +101,21 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
 
 
 def as_shape(obj: ShapeLike) -> Shape:
-    """Read a :data:`ShapeLike` into a :class:`Shape`."""
+    """Read a :data:`ShapeLike` into a :class:`Shape`.
+
+    The vertices keep the input's order: a file's (:func:`intrinsym.io.load`), the
+    rows of an array, a trimesh object's ``vertices``. An array is read as a point
+    cloud; one that is not (N, 3), holds NaN or infinity, or has fewer than 4 rows is
+    an :class:`~intrinsym.errors.InputError`.
+    """
     if isinstance(obj, Shape):
         return obj
     if isinstance(obj, (str, os.PathLike)):
         return io.load(obj)
     if isinstance(obj, tuple):
         return from_arrays(*obj)
+    if isinstance(obj, np.ndarray):
+        return from_arrays(obj, None)
     if hasattr(obj, "vertices"):  # a trimesh.Trimesh or PointCloud
         faces = getattr(obj, "faces", None)
         return from_arrays(np.asarray(obj.vertices), None if faces is None else np.asarray(faces))
