@@ -263,3 +263,52 @@ def test_viewer_colours_the_symmetry_view_by_confidence(tmp_path):
     finally:
         browser.close()
         pw.stop()
+
+
+def _hostile(tmp_path: Path) -> tuple[Path, Path]:
+    """A result whose mesh name, symmetry kinds and scores would break a page that
+    escapes only "</" and writes JSON's NaN: ``<!--<script>`` in the mesh's file name and
+    a kind, NaN and Infinity in scores.json and a symmetry's score."""
+    out, v = sphere_result(tmp_path)
+    _symmetries(out, v)
+    listed = json.loads((out / "symmetries.json").read_text())
+    listed[0].update(kind="<!--<script>", score=float("nan"))
+    listed[1]["kind"] = "global</script><script>window.hacked = 1</script>"
+    (out / "symmetries.json").write_text(json.dumps(listed))
+    (out / "scores.json").write_text(json.dumps({"mirror_hit": float("nan"), "map": {"mean_error": float("inf")}}))
+    mesh = tmp_path / "a<!--<script>.off"
+    shutil.copy(tmp_path / "sphere.off", mesh)
+    return out, mesh
+
+
+def test_page_data_is_strict_json_without_a_less_than_sign(tmp_path):
+    out, mesh = _hostile(tmp_path)
+    html = viewer.write(out, mesh_path=mesh)
+    text = html.read_text().split('id="data">', 1)[1].split("</script>", 1)[0]
+    assert "<" not in text
+
+    def reject(name):
+        raise ValueError(f"not JSON: {name}")
+
+    data = json.loads(text, parse_constant=reject)
+    assert data["name"] == mesh.name and data["symmetries"][0]["kind"] == "<!--<script>"
+    assert data["scores"] == {"mirror_hit": "NaN", "map": {"mean_error": "Infinity"}}
+    assert data["symmetries"][0]["score"] == "NaN"
+
+
+def test_hostile_names_and_scores_do_not_blank_the_page(tmp_path):
+    out, mesh = _hostile(tmp_path)
+    pw, browser, page, errors = _start_page(viewer.write(out, mesh_path=mesh))
+    try:
+        assert page.locator("#title").inner_text() == f"intrinsym: {mesh.name}"
+        assert page.evaluate("window.hacked") is None
+        scores = page.locator("#scores").inner_text()
+        assert "mirror_hit\tNaN" in scores and "map.mean_error\tInfinity" in scores
+        assert "<!--<script>, score NaN" in page.locator("#symmetries").inner_text()
+        page.locator("#symmetries input").nth(0).check()
+        page.locator("#symmetries input").nth(1).uncheck()
+        assert "<!--<script>, score NaN" in page.locator("#label-parts").inner_text()
+        assert errors == []
+    finally:
+        browser.close()
+        pw.stop()

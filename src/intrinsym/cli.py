@@ -345,10 +345,10 @@ def _result_dir(path: str) -> Path:
 
 def _render_or_view(args: argparse.Namespace) -> int:
     out = _result_dir(args.out)
-    if args.command == "view" and args.html is not None:
-        files.check_output_file(args.html)
+    if args.command == "render":
+        files.check_output_dir(out / "figures")
     else:
-        files.check_output_dir(out / ("figures" if args.command == "render" else "viewer.html"))
+        files.check_output_file(args.html if args.html is not None else out / "viewer.html")
     if args.command == "render":
         paths = viz.render(
             out,

@@ -4,6 +4,10 @@
 files at once (a reader sees the old set or the new one, never a mix), under a lock
 that keeps a second writer out (:func:`output_lock`). :func:`check_output_dir` and
 :func:`check_output_file` say before any work whether an output can be written.
+
+A result folder given as a symbolic link is written where the link points; a folder
+that is replaced keeps its mode, owner, group and extended attributes (ACLs), and one
+its caller may not write (or could not give back to its owner) is refused.
 """
 
 from __future__ import annotations
@@ -13,10 +17,12 @@ import ctypes
 import ctypes.util
 import errno
 import fcntl
+import math
 import os
+import re
 import shutil
+import stat
 import tempfile
-import time
 import zipfile
 import zlib
 from collections.abc import Callable, Collection, Iterator, Mapping
@@ -42,8 +48,14 @@ NPZ_LEVEL = 1
 NPZ_MIN_SAVING = 0.1
 NPZ_PROBE_BYTES = 1 << 18
 
+#: Date of every member of :func:`save_npz`'s archive (the zip format's earliest): two
+#: saves of the same arrays are the same bytes.
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+
 _HELD: dict[Path, int] = {}
 _RENAME_EXCHANGE = 2
+#: The random part of a name from :func:`tempfile.mkdtemp` and :func:`tempfile.mkstemp`.
+_RANDOM = "[a-z0-9_]{8}"
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], binary: bool = False) -> None:
@@ -75,16 +87,47 @@ def _deflates(array: np.ndarray, level: int) -> bool:
 def save_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray], level: int = NPZ_LEVEL) -> None:
     """Write ``arrays`` to ``path`` as NumPy's ``savez_compressed`` does (one ``NAME.npy``
     per array, read back by ``np.load``), each deflated at ``level`` unless deflate
-    hardly shrinks it (:func:`_deflates`), then stored as it is."""
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=level) as archive:
+    hardly shrinks it (:func:`_deflates`), then stored as it is. Every member is dated
+    :data:`ZIP_DATE`: the same arrays give the same bytes."""
+    with zipfile.ZipFile(path, "w") as archive:
         for name, value in arrays.items():
             array = np.asanyarray(value)
-            member: str | zipfile.ZipInfo = f"{name}.npy"
+            member = zipfile.ZipInfo(f"{name}.npy", date_time=ZIP_DATE)
             if array.size and not _deflates(array, level):
-                member = zipfile.ZipInfo(f"{name}.npy", date_time=time.localtime()[:6])
                 member.compress_type = zipfile.ZIP_STORED
+            else:
+                member.compress_type = zipfile.ZIP_DEFLATED
+                member._compresslevel = level  # type: ignore[attr-defined]  # ZipFile.open reads it
             with archive.open(member, "w", force_zip64=True) as f:
                 np.lib.format.write_array(f, array, allow_pickle=False)
+
+
+def npz_headers(path: str | os.PathLike) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """The shape and dtype of every array of the ``.npz`` archive ``path``, by name, from
+    the members' headers alone: nothing else is inflated.
+
+    Raises
+    ------
+    ValueError
+        A member that is not a ``.npy`` array of format version 1 or 2, or whose header
+        declares another size than the archive's directory gives it.
+    OSError, zipfile.BadZipFile, zlib.error
+        The file is missing, not a zip archive, or corrupt.
+    """
+    readers = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+    headers = {}
+    with zipfile.ZipFile(path) as archive:
+        for member in archive.infolist():
+            with archive.open(member) as f:
+                read = readers.get(np.lib.format.read_magic(f))
+                if read is None:
+                    raise ValueError(f"{member.filename} is not a .npy array of format version 1 or 2")
+                shape, _, dtype = read(f)
+                size = f.tell() + math.prod(shape) * dtype.itemsize
+            if not member.filename.endswith(".npy") or size != member.file_size:
+                raise ValueError(f"{member.filename} declares {shape} x {dtype} but holds {member.file_size} bytes")
+            headers[member.filename.removesuffix(".npy")] = (shape, dtype)
+    return headers
 
 
 def _umask() -> int:
@@ -94,15 +137,16 @@ def _umask() -> int:
     return mask
 
 
-def _existing_ancestor(path: Path) -> Path:
+def _existing_ancestor(path: Path, label: Path | None = None) -> Path:
     """The deepest existing folder at or above ``path``'s parent; :class:`OutputError`
-    when a file stands in the way."""
+    (naming ``label``, default ``path``) when a file stands in the way."""
+    name = path_label(path if label is None else label)
     for parent in path.absolute().parents:
         if parent.exists():
             if not parent.is_dir():
-                raise OutputError(f"{path_label(path)}: cannot write below {parent}, which is a file")
+                raise OutputError(f"{name}: cannot write below {parent}, which is a file")
             return parent
-    raise OutputError(f"{path_label(path)}: no folder to write into")
+    raise OutputError(f"{name}: no folder to write into")
 
 
 def _probe(folder: Path, path: Path) -> None:
@@ -117,10 +161,38 @@ def _probe(folder: Path, path: Path) -> None:
     os.unlink(probe)
 
 
+def _real(out: str | os.PathLike) -> Path:
+    """Where the folder ``out`` is: a symbolic link (at ``out`` or above it) followed."""
+    return Path(os.path.realpath(out))
+
+
+def _writable(folder: Path, info: os.stat_result) -> bool:
+    """Whether the caller may write in ``folder`` (``info`` its status); for root, which
+    may write anywhere, whether its owner may (``chmod a-w`` makes it read-only)."""
+    if os.geteuid() == 0:
+        return bool(info.st_mode & stat.S_IWUSR)
+    return os.access(folder, os.W_OK)
+
+
+def _check_replaceable(path: Path, info: os.stat_result) -> None:
+    """Refuse to replace the folder ``path`` (``info`` its status) unless the caller may
+    write it and give the new folder its owner and group."""
+    if not _writable(path, info):
+        raise OutputError(f"{path_label(path)}: the folder is read-only for you; choose another output folder")
+    groups = {os.getegid(), *os.getgroups()}
+    if os.geteuid() != 0 and (info.st_uid != os.geteuid() or info.st_gid not in groups):
+        raise OutputError(
+            f"{path_label(path)}: owned by user {info.st_uid}, group {info.st_gid}, which a new result "
+            "could not keep; choose another output folder"
+        )
+
+
 def check_output_dir(out: str | os.PathLike) -> Path:
     """Raise :class:`~intrinsym.errors.OutputError` unless a result folder can be
     written at ``out``: no file there or above it, and a writable folder to create it
-    in (its parent, or the deepest existing folder above it). Creates nothing.
+    in (its parent, or the deepest existing folder above it); an existing folder must be
+    writable by the caller, and replaceable by one of its owner and group
+    (:func:`write_set`). Creates nothing.
 
     Returns
     -------
@@ -128,9 +200,12 @@ def check_output_dir(out: str | os.PathLike) -> Path:
         ``out`` as a path.
     """
     path = Path(out)
-    if path.exists() and not path.is_dir():
-        raise OutputError(f"{path_label(path)}: exists and is not a folder")
-    _probe(_existing_ancestor(path), path)
+    real = _real(path)
+    if real.exists():
+        if not real.is_dir():
+            raise OutputError(f"{path_label(path)}: exists and is not a folder")
+        _check_replaceable(path, real.stat())
+    _probe(_existing_ancestor(real, path), path)
     return path
 
 
@@ -148,24 +223,40 @@ def check_output_file(path: str | os.PathLike) -> Path:
     return path
 
 
-def _lock_path(out: Path) -> Path:
-    return out.absolute().parent / f".{out.name}.lock"
+def _lock_path(real: Path) -> Path:
+    return real.parent / f".{real.name}.lock"
+
+
+def _open_lock(lock: Path, path: Path) -> int:
+    """Open (or create) the lock file ``lock`` of the folder ``path``, never through a
+    symbolic link and only when it is a plain file."""
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o666)
+    except OSError as err:
+        reason = "it is a symbolic link; remove it" if err.errno == errno.ELOOP else err.strerror
+        raise OutputError(f"{path_label(path)}: cannot open its lock {lock} ({reason})") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OutputError(f"{path_label(path)}: its lock {lock} is not a plain file; remove it")
+    return fd
 
 
 @contextlib.contextmanager
 def output_lock(out: str | os.PathLike) -> Iterator[Path]:
-    """Hold the lock of the result folder ``out`` (a file ``.NAME.lock`` beside it) for
-    the duration; re-entrant within one process.
+    """Hold the lock of the result folder ``out`` (a file ``.NAME.lock`` beside it, or
+    beside the folder a symbolic link ``out`` points to) for the duration; re-entrant
+    within one process. The lock file is opened without following a symbolic link.
 
     Checks ``out`` first (:func:`check_output_dir`) and creates its parent folders.
 
     Raises
     ------
     OutputError
-        When ``out`` cannot be written, or another process holds its lock.
+        When ``out`` cannot be written, its lock is not a plain file, or another process
+        holds it.
     """
     path = check_output_dir(out)
-    lock = _lock_path(path)
+    lock = _lock_path(_real(path))
     if lock in _HELD:
         yield path
         return
@@ -174,7 +265,7 @@ def output_lock(out: str | os.PathLike) -> Iterator[Path]:
     except OSError as err:
         raise OutputError(f"{path_label(path)}: cannot create {lock.parent} ({err.strerror})") from None
     while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        fd = _open_lock(lock, path)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as err:
@@ -183,7 +274,7 @@ def output_lock(out: str | os.PathLike) -> Iterator[Path]:
                 raise OutputError(f"{path_label(path)}: another process is writing it (lock {lock})") from None
             raise
         try:  # the holder before us may have removed the file we locked: lock the new one
-            if os.stat(lock).st_ino == os.fstat(fd).st_ino:
+            if os.lstat(lock).st_ino == os.fstat(fd).st_ino:
                 break
         except FileNotFoundError:
             pass
@@ -215,10 +306,18 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(err, os.strerror(err), str(b))
 
 
+def _temporaries(names: Collection[str]) -> re.Pattern[str]:
+    """The names :func:`tempfile.mkdtemp` and :func:`tempfile.mkstemp` give the
+    temporaries of :func:`write_set` and :func:`atomic_write` for any of ``names``."""
+    return re.compile(rf"\.(?:{'|'.join(map(re.escape, names))})\.{_RANDOM}\.(?:tmp|old)")
+
+
 def _carry(old: Path, new: Path, names: set[str]) -> None:
-    """Hard-link (or copy) every entry of ``old`` not in ``names`` into ``new``."""
+    """Hard-link (or copy) every entry of ``old`` not in ``names`` into ``new``, but the
+    temporaries of an interrupted write of one of ``names``."""
+    temporary = _temporaries(names)
     for entry in old.iterdir():
-        if entry.name in names:
+        if entry.name in names or temporary.fullmatch(entry.name):
             continue
         target = new / entry.name
         if entry.is_dir() and not entry.is_symlink():
@@ -236,14 +335,59 @@ def _link_or_copy(src: str | os.PathLike, dst: str | os.PathLike) -> None:
         shutil.copy2(src, dst)
 
 
+def _sweep(real: Path) -> None:
+    """Remove the temporary folders that killed :func:`write_set` calls of ``real`` left
+    beside it; called with its lock held, so no live writer owns one. Only the caller's
+    own folders of exactly the temporaries' names are touched. When a kill left ``real``
+    moved aside (where no atomic exchange exists), it is first put back."""
+    temporary = _temporaries([real.name])
+    found = []
+    for entry in os.scandir(real.parent):
+        if temporary.fullmatch(entry.name):
+            info = entry.stat(follow_symlinks=False)
+            if stat.S_ISDIR(info.st_mode) and info.st_uid == os.geteuid():
+                found.append((info.st_mtime, Path(entry.path)))
+    moved = sorted(item for item in found if item[1].suffix == ".old")
+    if moved and not real.exists():
+        os.replace(moved[-1][1], real)
+        found.remove(moved[-1])
+    for _, folder in found:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _keep_attributes(old: Path, info: os.stat_result, new: Path, written: Collection[str]) -> None:
+    """Give the folder ``new`` the owner, group, extended attributes (ACLs) and mode of
+    ``old`` (``info`` its status); the files ``written`` in it its owner and group too."""
+    if (info.st_uid, info.st_gid) != (os.geteuid(), os.getegid()):
+        for entry in (new, *(new / name for name in written)):
+            os.lchown(entry, info.st_uid, info.st_gid)
+    try:
+        names = os.listxattr(old)
+    except OSError as err:
+        if err.errno not in (errno.ENOTSUP, errno.ENODATA, errno.EINVAL):
+            raise
+        names = []
+    for name in names:
+        try:
+            os.setxattr(new, name, os.getxattr(old, name))
+        except OSError as err:  # a namespace this caller may not set (security.*), or none there
+            if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.ENODATA, errno.EINVAL):
+                raise
+    os.chmod(new, stat.S_IMODE(info.st_mode))
+
+
 def write_set(out: str | os.PathLike, writers: Mapping[str, Writer], owned: Collection[str] = ()) -> Path:
     """Write a folder's set of files at once.
 
     Each ``writers[name](path)`` writes ``path``, inside a temporary folder beside
-    ``out``; the other entries of an existing ``out`` (but those named in ``owned``) are hard-linked (else copied) into
-    it, and it then replaces ``out`` in one step (an atomic exchange on Linux, else two
-    renames). Until then the previous folder stays whole; a failure or an interrupt
-    leaves it as it was and removes the temporary folder. Holds :func:`output_lock`.
+    ``out`` (private to the caller while it is written); the other entries of an existing
+    ``out`` (but those named in ``owned``) are hard-linked (else copied) into it, it gets
+    the mode, owner, group and extended attributes of ``out`` (a new folder: 0777 less
+    the umask), and it then replaces ``out`` in one step (an atomic exchange on Linux,
+    else two renames). Until then the previous folder stays whole; a failure or an
+    interrupt leaves it as it was and removes the temporary folder, and the temporary
+    folders of a killed call are removed by the next (:func:`_sweep`). A symbolic link
+    ``out`` stays: the folder it points to is replaced. Holds :func:`output_lock`.
 
     Parameters
     ----------
@@ -253,7 +397,7 @@ def write_set(out: str | os.PathLike, writers: Mapping[str, Writer], owned: Coll
         ``{"result.npz": write_npz, ...}``; each is called with the path to write.
     owned : collection of str
         Further names of the set, removed from ``out`` when not written (a file the
-        previous set had and this one has not).
+        previous set had and this one has not, a file derived from the previous set).
 
     Returns
     -------
@@ -261,27 +405,29 @@ def write_set(out: str | os.PathLike, writers: Mapping[str, Writer], owned: Coll
         ``out``.
     """
     with output_lock(out) as path:
-        path = path.absolute()
-        new = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+        real = _real(path)
+        _sweep(real)
+        new = Path(tempfile.mkdtemp(dir=real.parent, prefix=f".{real.name}.", suffix=".tmp"))
         tmp: Path | None = new  # what is left to remove
         old: Path | None = None
         try:
-            os.chmod(new, 0o777 & ~_umask())
             for name, write in writers.items():
                 write(new / name)
-            if path.is_dir():
-                _carry(path, new, {*writers, *owned})
-                if not _exchange(new, path):
-                    old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".old"))
-                    os.replace(path, old)
-                    os.replace(new, path)
+            if real.is_dir():
+                _carry(real, new, {*writers, *owned})
+                _keep_attributes(real, real.stat(), new, writers)
+                if not _exchange(new, real):
+                    old = Path(tempfile.mkdtemp(dir=real.parent, prefix=f".{real.name}.", suffix=".old"))
+                    os.replace(real, old)
+                    os.replace(new, real)
                     old, tmp = None, old
             else:
-                os.replace(new, path)
+                os.chmod(new, 0o777 & ~_umask())
+                os.replace(new, real)
                 tmp = None
         except BaseException:
-            if old is not None and not path.exists():
-                os.replace(old, path)
+            if old is not None and not real.exists():
+                os.replace(old, real)
             raise
         finally:
             if tmp is not None:

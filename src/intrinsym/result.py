@@ -9,22 +9,24 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import zipfile
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, cast
 
 import numpy as np
 
-from . import model, records
+from . import model, records, resources
 from .confidence import calibrated, carried_confidence, disagreement, map_mass, round_trip, score
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
-from .files import Writer, save_npz, write_set
+from .files import Writer, npz_headers, save_npz, write_set
 from .params import Params
-from .runinfo import RunInfo, stored_params
+from .runinfo import RunInfo, Sizes, stored_params
 from .support import Support
 from .vertex_maps import fitted_vertex_map
 
@@ -101,6 +103,9 @@ class Result:
         "symmetry_mass.npy",
         "symmetry_confidence.npy",
     )
+    #: What ``intrinsym evaluate``, ``view`` and ``render`` derive from a result set in its
+    #: folder: a new set removes them (:meth:`save`).
+    DERIVED: ClassVar[tuple[str, ...]] = ("scores.json", "curve.png", "viewer.html", "figures")
     ARRAYS: ClassVar[tuple[str, ...]] = (
         "source_points",
         "target_points",
@@ -240,12 +245,16 @@ class Result:
         """``run.json``'s content: the parameters and :class:`RunInfo`."""
         return {"params": dataclasses.asdict(self.params), **self.info.to_dict()}
 
-    def save(self, out_dir: str | os.PathLike) -> Path:
+    def save(self, out_dir: str | os.PathLike, derived: Mapping[str, Writer] | None = None) -> Path:
         """Write ``out_dir/result.npz`` and ``out_dir/run.json``, and with an extraction
         ``symmetries.json`` and ``symmetry_map.npy``, as one set
         (:func:`intrinsym.files.write_set`: the previous set stays whole until the new
         one replaces it; another process writing ``out_dir`` at the same time is refused
-        with :class:`~intrinsym.errors.OutputError`)."""
+        with :class:`~intrinsym.errors.OutputError`).
+
+        The files derived from the previous set (:attr:`DERIVED`) go with it, but those
+        ``derived`` writes with the new set (``{"scores.json": write, ...}``, each called
+        with the path to write); the folder's other files stay."""
         out = Path(out_dir)
         arrays = {name: getattr(self, name) for name in self.ARRAYS}
         if self.support is not None:
@@ -279,7 +288,7 @@ class Result:
             conf = self.symmetry_confidence(mass)
             writers["symmetry_mass.npy"] = lambda path: np.save(path, mass)
             writers["symmetry_confidence.npy"] = lambda path: np.save(path, conf)
-        write_set(out, writers, owned=self.FILES)
+        write_set(out, {**writers, **(derived or {})}, owned=(*self.FILES, *self.DERIVED))
         return out
 
     @classmethod
@@ -293,8 +302,13 @@ class Result:
             A file missing, truncated or corrupt (one line naming it).
         """
         out = Path(out_dir)
-        name = out / "result.npz"
+        name = out / "run.json"
         try:
+            run = json.loads(name.read_text())
+            params = Params(**stored_params(run))
+            info = RunInfo.from_dict(run)
+            name = out / "result.npz"
+            _check_arrays(name, npz_headers(name), info.sizes, params)
             with np.load(name) as z:
 
                 def get(key: str) -> np.ndarray | None:
@@ -310,10 +324,6 @@ class Result:
                 support = Support.from_arrays(z) if Support.stored_in(z.files) else None
                 zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
                 map_distortion = get("map_distortion")
-            name = out / "run.json"
-            run = json.loads(name.read_text())
-            params = Params(**stored_params(run))
-            info = RunInfo.from_dict(run)
         except _UNREADABLE as err:
             reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"
             raise ResultError(f"{name}: cannot read it ({reason}); run intrinsym detect again") from None
@@ -326,6 +336,63 @@ class Result:
             pass_marginals=pass_marginals,
             map_distortion=map_distortion,
         )
+
+
+def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
+    """The shape of every array ``result.npz`` holds (under its current and its version 1
+    name), in the sizes of ``run.json``; a letter stands for a size it does not record,
+    the same in every array: N and M the input vertices of the source and the target
+    shape, P the BP passes after the first."""
+    s, t, e, d = sizes.source, sizes.target, sizes.edges, sizes.target_distance_entries
+    shapes: dict[str, tuple[int | str, ...]] = {
+        "source_points": (s, 3),
+        "target_points": (t, 3),
+        "source_point_vertex": (s,),
+        "target_point_vertex": (t,),
+        "edges": (e, 2),
+        "unary": (s, t),
+        "marginals": (s, t),
+        "pass_marginals": ("P", s, t),
+        "zoomout_map": ("N",),
+        "map_distortion": ("N",),
+        "edge_length": (e,),
+        "vertex_source": ("N",),
+        "vertex_target": ("M",),
+        "target_distance_indptr": (t + 1,),
+        "target_distance_index": (d,),
+        "target_distance": (d,),
+        "target_distance_radius": (),
+        "self_match": (),
+        "source_mesh_vertices": ("N", 3),
+        "target_mesh_vertices": ("M", 3),
+    }
+    renamed = {**V1_ARRAYS, **Support.OLD_KEYS}
+    return shapes | {renamed[key]: shape for key, shape in shapes.items() if key in renamed}
+
+
+def _check_arrays(name: Path, headers: Mapping[str, tuple[tuple[int, ...], np.dtype]], sizes: Sizes, p: Params) -> None:
+    """Refuse a ``result.npz`` (``name``, its arrays' ``headers``) whose arrays have other
+    shapes than ``run.json``'s ``sizes`` and parameters ``p`` give them
+    (:class:`ResultError`), or more bytes than memory holds
+    (:class:`~intrinsym.errors.ResourceError`), before any is read."""
+    shapes, free = _shapes(sizes), dict[str, int]()
+    for key, (shape, _) in headers.items():
+        want = shapes.get(key)
+        if want is None:
+            continue
+        fits = len(shape) == len(want)
+        for have, size in zip(shape, want):
+            fits &= have == (free.setdefault(size, have) if isinstance(size, str) else size)
+        if not fits:
+            text = ", ".join(str(free.get(size, size)) if isinstance(size, str) else str(size) for size in want)
+            raise ResultError(
+                f"{name}: its array {key} is {shape}, not ({text}) as run.json's sizes say; run intrinsym detect again"
+            )
+    passes = max(p.passes or 2, 1) - 1
+    if free.get("P", 0) > passes:
+        raise ResultError(f"{name}: holds {free['P']} further BP passes, more than the {passes} of run.json")
+    nbytes = sum(math.prod(shape) * dtype.itemsize for shape, dtype in headers.values())
+    resources.check_memory(nbytes, "reading its arrays", str(name))
 
 
 def saved_global_confidence(out_dir: str | os.PathLike, has_global: bool) -> float | None:

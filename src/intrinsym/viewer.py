@@ -22,6 +22,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import json
+import math
 import zlib
 from collections.abc import Mapping, Sequence
 from importlib import resources
@@ -328,8 +329,25 @@ def payload(
     return data
 
 
+#: How the page gets a number JSON cannot hold (its JSON parser rejects ``NaN``).
+NOT_FINITE = {math.inf: "Infinity", -math.inf: "-Infinity"}
+
+
+def _finite(value: Any) -> Any:
+    """``value`` (JSON-ready) with every float that is not finite as a string: "NaN",
+    "Infinity" or "-Infinity" (:data:`NOT_FINITE`)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return NOT_FINITE.get(value, "NaN")
+    if isinstance(value, Mapping):
+        return {key: _finite(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(item) for item in value]
+    return value
+
+
 def render_html(data: dict) -> str:
-    """The page with ``data`` inlined.
+    """The page with ``data`` inlined: strict JSON (numbers that are not finite as
+    strings, :func:`_finite`) with every ``<`` escaped.
 
     Parameters
     ----------
@@ -341,8 +359,11 @@ def render_html(data: dict) -> str:
     str
     """
     template = resources.files("intrinsym").joinpath("static/viewer.html").read_text(encoding="utf-8")
-    # "</" inside the JSON would end the <script> element; "<\/" is the same JSON string.
-    return template.replace("__DATA__", json.dumps(data, separators=(",", ":")).replace("</", "<\\/"))
+    text = json.dumps(_finite(data), separators=(",", ":"), allow_nan=False)
+    # "<" occurs in JSON only inside strings, where "\u003c" is the same character; a
+    # "<" there could end the <script> element ("</script") or change how the browser
+    # reads it ("<!--<script>").
+    return template.replace("__DATA__", text.replace("<", "\\u003c"))
 
 
 def write(

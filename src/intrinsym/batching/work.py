@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import tempfile
 import threading
 import time
@@ -87,14 +88,11 @@ def local_files(files: dict[str, bytes] | None) -> Iterator[Callable[[str], str]
 
 
 def save(result: Result, scores: dict[str, Any] | None, folder: Path, after_save: AfterSave | None = None) -> None:
-    """Write an item's folder: ``scores.json`` first, then the result set (its ``run.json``
-    holds the content key, so the folder counts as complete only once all is written)."""
+    """Write an item's folder: the result set with its ``scores.json`` (one set: its
+    ``run.json`` holds the content key, so the folder counts as complete only once all is
+    written; an earlier ``scores.json`` goes with the earlier set)."""
     folder.mkdir(parents=True, exist_ok=True)
-    if scores is not None:
-        evaluate.save_scores(scores, folder / "scores.json")
-    else:
-        (folder / "scores.json").unlink(missing_ok=True)
-    result.save(folder)
+    result.save(folder, None if scores is None else {"scores.json": functools.partial(evaluate.save_scores, scores)})
     if after_save is not None:
         after_save(folder)
 
