@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pytest
+import trimesh
 
 import intrinsym
 from intrinsym import cli, params
@@ -126,6 +127,15 @@ def test_bad_input_is_one_line_exit_2_no_output(tmp_path, content, name, match):
     assert name in lines[0] and match in lines[0].lower()
     assert "Traceback" not in p.stderr
     assert not out.exists()
+
+
+def test_a_thin_needle_runs(tmp_path):
+    # its spin images are all alike: the unary's width was 0 and the potentials NaN
+    path = tmp_path / "needle.off"
+    trimesh.creation.cylinder(radius=1e-6, height=1, sections=16).export(path)
+    p = run("detect", path, "-o", tmp_path / "out", "-q", "--source", "30", "--target", "300", "--iterations", "5")
+    assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
+    assert (tmp_path / "out" / "symmetry_map.npy").is_file()
 
 
 def test_missing_file_and_bad_parameters(tmp_path):
