@@ -121,6 +121,19 @@ def test_obj_with_latin1_comment_and_names(tmp_path):
     raises_one_line(tmp_path / "latin.off", "line 4: not a text file")
 
 
+def test_latin1_comment_in_ascii_ply_and_solid_name_in_ascii_stl(tmp_path):
+    box = trimesh.creation.box()
+    ply = trimesh.exchange.ply.export_ply(box, encoding="ascii")
+    ply = ply.replace(b"format ascii 1.0\n", "format ascii 1.0\ncomment Würfel\n".encode("latin-1"))
+    (tmp_path / "box.ply").write_bytes(ply)
+    np.testing.assert_array_equal(load(tmp_path / "box.ply").faces, box.faces)
+    (tmp_path / "box.ply").write_bytes(ply.replace(b"end_header\n", b"end_header\n\xfc"))
+    raises_one_line(tmp_path / "box.ply", "truncated or corrupt PLY file")  # not in a comment
+    stl = trimesh.exchange.stl.export_stl_ascii(box).replace("solid", "solid Würfel", 1).encode("latin-1")
+    (tmp_path / "box.stl").write_bytes(stl)
+    assert load(tmp_path / "box.stl").faces.shape == (12, 3)
+
+
 def test_obj_with_only_vertices_is_a_point_cloud(tmp_path):
     text = "".join(f"v {x} {y} {z}\n" for x, y, z in PYRAMID_V)
     shape = load(write(tmp_path, "points.obj", text))

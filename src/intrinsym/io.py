@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import stat
 import warnings
+from io import BytesIO
 
 import numpy as np
 
@@ -167,9 +169,28 @@ def _trimesh_arrays(loaded, label: str, kind: str) -> tuple[np.ndarray, np.ndarr
     raise InputError(f"{label}: the {kind} file holds no triangle mesh or point cloud")
 
 
-def _trimesh_load(path: str, file_type: str) -> object:
+#: The lines of ASCII PLY and STL that hold only comments and names.
+NAME_LINES = {"ply": (b"comment", b"obj_info"), "stl": (b"solid", b"endsolid")}
+
+
+def _readable_names(data: bytes, file_type: str) -> bytes:
+    """``data``, with the bytes that are not ASCII in its comment and name lines
+    (:data:`NAME_LINES`) replaced by ``?`` when it is not UTF-8 text: trimesh decodes
+    ASCII PLY and STL as UTF-8, and would refuse a Latin-1 comment or solid name, which
+    carries no geometry. Other such bytes are left for trimesh to refuse."""
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        keys = NAME_LINES[file_type]
+        lines = data.split(b"\n")
+        return b"\n".join(re.sub(rb"[\x80-\xff]", b"?", ln) if ln.lstrip().startswith(keys) else ln for ln in lines)
+    return data
+
+
+def _trimesh_load(path: str, file_type: str, text: bool) -> object:
     """``trimesh.load`` without processing, its log (it prints tracebacks for recoverable
-    problems) and its numeric warnings on corrupt values (checked after reading) silenced."""
+    problems) and its numeric warnings on corrupt values (checked after reading) silenced.
+    A ``text`` file is given to trimesh with :func:`_readable_names`."""
     import trimesh
 
     logger = logging.getLogger("trimesh")
@@ -178,7 +199,11 @@ def _trimesh_load(path: str, file_type: str) -> object:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            return trimesh.load(path, file_type=file_type, process=False)
+            if not text:
+                return trimesh.load(path, file_type=file_type, process=False)
+            with open(path, "rb") as fh:
+                source = BytesIO(_readable_names(fh.read(), file_type))
+            return trimesh.load(source, file_type=file_type, process=False)
     finally:
         logger.setLevel(previous)
 
@@ -193,7 +218,7 @@ def _read_ply(path: str, label: str) -> tuple[np.ndarray, np.ndarray | None]:
     if header.format.startswith("binary"):
         return io_ply.read_binary(path, label, header)
     try:
-        loaded = _trimesh_load(path, "ply")
+        loaded = _trimesh_load(path, "ply", text=True)
     except Exception as err:  # trimesh raises many types on malformed input
         ascii_start = header.lines if header.format == "ascii" else None
         raise _trimesh_failure(path, label, "PLY", err, ascii_start) from None
@@ -231,7 +256,7 @@ def _read_stl(path: str, label: str, size: int) -> tuple[np.ndarray, np.ndarray]
         )
         raise InputError(f"{label}: truncated or corrupt binary STL file: {detail}")
     try:
-        loaded = _trimesh_load(path, "stl")
+        loaded = _trimesh_load(path, "stl", text=not is_binary)
     except Exception as err:  # trimesh raises many types on malformed input
         raise _trimesh_failure(path, label, "STL", err, None if is_binary else 0, "vertex") from None
     vertices, faces = _trimesh_arrays(loaded, label, "STL")
