@@ -192,18 +192,23 @@ def test_a_folder_moved_aside_by_a_killed_save_is_put_back(tmp_path):
     assert _hidden(tmp_path) == []
 
 
+def _npy_header(shape: tuple[int, ...]) -> bytes:
+    """A float32 .npy header (format version 1) declaring ``shape``."""
+    text = repr({"descr": "<f4", "fortran_order": False, "shape": shape}).encode("latin1")
+    text += b" " * (63 - (10 + len(text)) % 64) + b"\n"
+    return b"\x93NUMPY\x01\x00" + len(text).to_bytes(2, "little") + text
+
+
 def _rewrite_member(npz: Path, name: str, shape: tuple[int, ...], chunks: list[bytes] | Iterator[bytes]) -> None:
     """Replace the float32 array ``name`` of ``npz`` by one whose .npy header declares
     ``shape``, followed by ``chunks`` (deflated as they come)."""
     with zipfile.ZipFile(npz) as archive:
         members = {m.filename: archive.read(m) for m in archive.infolist() if m.filename != name}
-    text = repr({"descr": "<f4", "fortran_order": False, "shape": shape}).encode("latin1")
-    text += b" " * (63 - (10 + len(text)) % 64) + b"\n"
     with zipfile.ZipFile(npz, "w", zipfile.ZIP_DEFLATED) as archive:
         for member, data in members.items():
             archive.writestr(member, data)
         with archive.open(name, "w", force_zip64=True) as f:
-            f.write(b"\x93NUMPY\x01\x00" + len(text).to_bytes(2, "little") + text)
+            f.write(_npy_header(shape))
             for chunk in chunks:
                 f.write(chunk)
 
@@ -219,6 +224,18 @@ def test_result_npz_declaring_other_shapes_than_run_json_is_refused_unread(tmp_p
     for argv in (["query", str(out), "--vertex", "0"], ["view", str(out)], ["render", str(out)]):
         one_line_error(capsys, cli.main(argv), "result.npz", "unary")
     assert not (out / "viewer.html").exists() and not (out / "figures").exists()
+
+
+def test_npy_files_declaring_more_than_they_hold_are_refused_unread(tmp_path, capsys):
+    out, v = sphere_result(tmp_path)
+    lying = _npy_header((10**12,)) + bytes(64)
+    (out / "symmetry_confidence.npy").write_bytes(lying)
+    one_line_error(capsys, cli.main(["view", str(out)]), "symmetry_confidence.npy", "declares (1000000000000,)")
+    (tmp_path / "truth.npy").write_bytes(lying)
+    code = cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "truth.npy")])
+    one_line_error(capsys, code, "truth.npy", "declares (1000000000000,)")
+    np.save(tmp_path / "truth.npy", np.arange(len(v)))  # a true .npy reads as before
+    assert cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "truth.npy")]) == 0
 
 
 def test_result_npz_with_more_bp_passes_than_run_json_is_refused(tmp_path):

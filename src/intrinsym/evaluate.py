@@ -49,7 +49,7 @@ from . import geodesics
 from .confidence import calibration_report
 from .distortion import map_distortion
 from .errors import InputError
-from .files import atomic_write
+from .files import atomic_write, read_npy
 from .shape import Shape, surface_area, vertex_areas
 
 
@@ -85,7 +85,7 @@ def load_symmetry_map(
     p = Path(path)
     try:
         if p.suffix.lower() == ".npy":
-            raw = np.load(p, allow_pickle=False)
+            raw = read_npy(p)
             values, base = np.asarray(raw).ravel(), 0
         else:
             values, base = np.array(p.read_text().split(), dtype=np.float64), 1
@@ -112,7 +112,7 @@ def load_confidence(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
         On an unreadable file, another length than ``n_vertices``, or values outside [0, 1].
     """
     try:
-        values = np.asarray(np.load(path, allow_pickle=False), dtype=np.float64).ravel()
+        values = np.asarray(read_npy(path), dtype=np.float64).ravel()
     except (OSError, ValueError, TypeError) as err:
         raise InputError(f"{path}: cannot read a confidence ({err})") from None
     if len(values) != n_vertices:
@@ -391,9 +391,7 @@ def load_labels(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     p = Path(path)
     try:
         values = (
-            np.load(p, allow_pickle=False).ravel()
-            if p.suffix.lower() == ".npy"
-            else np.array(p.read_text().split(), dtype=np.float64)
+            read_npy(p).ravel() if p.suffix.lower() == ".npy" else np.array(p.read_text().split(), dtype=np.float64)
         )
     except (OSError, ValueError) as err:
         raise InputError(f"{path}: cannot read labels ({err})") from None

@@ -102,6 +102,42 @@ def save_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray], level: i
                 np.lib.format.write_array(f, array, allow_pickle=False)
 
 
+def _npy_header(f: IO[bytes], name: str) -> tuple[tuple[int, ...], np.dtype, int]:
+    """Shape, dtype and total size in bytes (header and data) that the ``.npy`` array at
+    the start of ``f`` (called ``name`` in messages) declares; ``f`` is left at its data."""
+    readers = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
+    read = readers.get(np.lib.format.read_magic(f))
+    if read is None:
+        raise ValueError(f"{name} is not a .npy array of format version 1 or 2")
+    shape, _, dtype = read(f)
+    return shape, dtype, f.tell() + math.prod(shape) * dtype.itemsize
+
+
+def _declared(name: str, shape: tuple[int, ...], dtype: np.dtype, nbytes: int) -> ValueError:
+    return ValueError(f"{name} declares {shape} x {dtype} but holds {nbytes} bytes")
+
+
+def read_npy(path: str | os.PathLike) -> np.ndarray:
+    """``np.load(path, allow_pickle=False)`` of a ``.npy`` file whose header is first
+    checked against the file's size: a header that declares more than the file holds is
+    a ValueError, not an allocation of what it declares.
+
+    Raises
+    ------
+    ValueError
+        Not a ``.npy`` array of format version 1 or 2, or another size than it declares.
+    OSError
+        The file cannot be read.
+    """
+    with open(path, "rb") as f:
+        shape, dtype, size = _npy_header(f, Path(path).name)
+        nbytes = os.fstat(f.fileno()).st_size
+        if size != nbytes:
+            raise _declared(Path(path).name, shape, dtype, nbytes)
+        f.seek(0)
+        return np.load(f, allow_pickle=False)
+
+
 def npz_headers(path: str | os.PathLike) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """The shape and dtype of every array of the ``.npz`` archive ``path``, by name, from
     the members' headers alone: nothing else is inflated.
@@ -114,18 +150,13 @@ def npz_headers(path: str | os.PathLike) -> dict[str, tuple[tuple[int, ...], np.
     OSError, zipfile.BadZipFile, zlib.error
         The file is missing, not a zip archive, or corrupt.
     """
-    readers = {(1, 0): np.lib.format.read_array_header_1_0, (2, 0): np.lib.format.read_array_header_2_0}
     headers = {}
     with zipfile.ZipFile(path) as archive:
         for member in archive.infolist():
             with archive.open(member) as f:
-                read = readers.get(np.lib.format.read_magic(f))
-                if read is None:
-                    raise ValueError(f"{member.filename} is not a .npy array of format version 1 or 2")
-                shape, _, dtype = read(f)
-                size = f.tell() + math.prod(shape) * dtype.itemsize
+                shape, dtype, size = _npy_header(f, member.filename)
             if not member.filename.endswith(".npy") or size != member.file_size:
-                raise ValueError(f"{member.filename} declares {shape} x {dtype} but holds {member.file_size} bytes")
+                raise _declared(member.filename, shape, dtype, member.file_size)
             headers[member.filename.removesuffix(".npy")] = (shape, dtype)
     return headers
 
