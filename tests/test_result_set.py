@@ -4,6 +4,7 @@ save leaves behind, and result.npz files that declare more than run.json says.""
 
 import json
 import os
+import struct
 import subprocess
 import sys
 import time
@@ -73,15 +74,21 @@ def test_view_writes_its_page_again_and_again(tmp_path, capsys):
 def test_a_rerun_keeps_the_folders_mode_owner_group_and_attributes(tmp_path):
     out, _ = sphere_result(tmp_path)
     os.setxattr(out, "user.intrinsym-test", b"kept")
+    # an access ACL (the binary form setfacl writes): owner rwx, user 65534 r-x, group r-x, mask r-x, other ---
+    entries = [(0x01, 7, -1), (0x02, 5, NOBODY), (0x04, 5, -1), (0x10, 5, -1), (0x20, 0, -1)]
+    acl = struct.pack("<I", 2) + b"".join(struct.pack("<HHi", tag, perm, who) for tag, perm, who in entries)
+    os.setxattr(out, "system.posix_acl_access", acl)
     owner = (NOBODY, NOBODY) if ROOT else (os.geteuid(), os.getegid())
     os.chown(out, *owner)
     os.chmod(out, 0o2750)
+    acl = os.getxattr(out, "system.posix_acl_access")
     Result.load(out).save(out)
     info = out.stat()
     assert oct(info.st_mode & 0o7777) == oct(0o2750)
     assert (info.st_uid, info.st_gid) == owner
     assert (out / "run.json").stat().st_uid == owner[0]
     assert os.getxattr(out, "user.intrinsym-test") == b"kept"
+    assert os.getxattr(out, "system.posix_acl_access") == acl
     assert _hidden(tmp_path) == []
     # A new folder gets the umask's mode.
     old = os.umask(0o027)
