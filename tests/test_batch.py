@@ -6,19 +6,24 @@ batch, and pairs mode runs ``match`` over the Sumner horse frames."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import threading
 import time
+import urllib.request
 from pathlib import Path
+from urllib.parse import urlparse
 
 import distributed
 import numpy as np
 import pandas as pd
+import psutil
 import pytest
 
 import intrinsym
@@ -59,7 +64,7 @@ def cluster():
             processes=True,
             host="127.0.0.1",
             env=ONE_THREAD,
-            dashboard_address=":0",
+            dashboard_address="127.0.0.1:0",
             silence_logs=40,
         ) as c:
             yield c
@@ -329,3 +334,117 @@ def test_the_local_cluster_fits_the_cores_and_the_memory() -> None:
     plan = engine.plan_cluster(big, n_cores=16, memory=64 << 30)
     assert plan.workers * plan.item_bytes <= 64 << 30 < (plan.workers + 1) * plan.item_bytes
     assert plan.workers * plan.threads <= 16
+
+
+def _one_line_error(capsys: pytest.CaptureFixture, code: int, *words: str) -> None:
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("intrinsym: error: ") and err.count("\n") == 1, err
+    for word in words:
+        assert word in err, err
+
+
+@pytest.mark.parametrize("name", ["../x", "ABSOLUTE", "..", ".", "a/b", ".hidden", "summary.csv"])
+def test_a_manifest_name_that_is_not_a_plain_folder_name_is_refused(
+    meshes: Path, tmp_path: Path, capsys: pytest.CaptureFixture, name: str
+) -> None:
+    """``name`` chooses the item's folder in OUT: a path would put the result set anywhere."""
+    name = str(tmp_path / "elsewhere") if name == "ABSOLUTE" else name
+    manifest = tmp_path / "list.csv"
+    manifest.write_text(f"mesh,name\n{meshes / 'cubo.off'},ok\n{meshes / 'star.off'},{name}\n")
+    code = main(["batch", str(manifest), "-o", str(tmp_path / "out"), *TINY_FLAGS])
+    _one_line_error(capsys, code, f"{manifest}: line 3: name {name!r} is not a plain folder name")
+    assert [p.name for p in tmp_path.iterdir()] == ["list.csv"]
+    hidden = tmp_path / ".x.off"  # a mesh whose derived name would be empty: OUT itself
+    shutil.copy(meshes / "star.off", hidden)
+    with pytest.raises(intrinsym.InputError, match=r"\.x\.off: name '' is not a plain folder name"):
+        items.collect([str(hidden)], PARAMS)
+
+
+def _listening() -> set[tuple[str, int]]:
+    """The (address, port) pairs that this process and its children listen on."""
+    me = psutil.Process()
+    found = set()
+    for process in (me, *me.children(recursive=True)):
+        with contextlib.suppress(psutil.Error):
+            found |= {(c.laddr.ip, c.laddr.port) for c in process.net_connections("inet") if c.status == "LISTEN"}
+    return found
+
+
+def test_the_local_cluster_and_its_dashboard_listen_on_loopback_only() -> None:
+    """The dashboard has no authentication: on every interface it would let anyone on the
+    network see the batch and its files' names."""
+    before = _listening()
+    client, cluster = engine.connect(engine.ClusterPlan(1, 1, 2 << 30, 0), None)
+    try:
+        opened = _listening() - before
+        link = urlparse(client.dashboard_link)
+        ports = {port for _, port in opened}
+        assert link.hostname == "127.0.0.1" and link.port in ports and cluster.scheduler.port in ports
+        assert len(ports) >= 4  # scheduler, dashboard, the worker and its nanny
+        assert {address for address, _ in opened} == {"127.0.0.1"}, opened
+        with urllib.request.urlopen(client.dashboard_link, timeout=30) as page:  # it serves, on loopback
+            assert page.status == 200
+    finally:
+        client.close()
+        cluster.close()
+
+
+def _closed_port() -> int:
+    """A loopback port that nothing listens on (bound, then released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_scheduler_where_nothing_listens_is_a_one_line_error_at_once(meshes: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    command = [sys.executable, "-m", "intrinsym", "batch", str(meshes / "star.off"), "-o", str(out)]
+    start = time.monotonic()
+    p = subprocess.run([*command, "--scheduler", address, "-q"], capture_output=True, text=True, timeout=120)
+    assert time.monotonic() - start < 20
+    assert p.returncode == 2 and p.stderr.count("\n") == 1, p.stderr
+    assert f"--scheduler {address}: no scheduler answers there" in p.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "message"),
+    [
+        ("--workers", "0", "--workers must lie in [1, CORES] (the cores this process may use), not 0"),
+        ("--workers", "1000", "--workers must lie in [1, CORES] (the cores this process may use), not 1000"),
+        ("--workers", "-1", "--workers must lie in [1, CORES] (the cores this process may use), not -1"),
+        ("--scheduler", "tcp://127.0.0.1:port", "--scheduler 'tcp://127.0.0.1:port': not a scheduler address"),
+        ("--scheduler", "nonsense", "--scheduler 'nonsense': not a scheduler address (missing port number"),
+        ("--scheduler", "tcp://127.0.0.1:70000", "not a scheduler address (port 70000 out of range)"),
+    ],
+)
+def test_a_bad_workers_or_scheduler_value_is_a_one_line_error_before_out(
+    meshes: Path, tmp_path: Path, capsys: pytest.CaptureFixture, flag: str, value: str, message: str
+) -> None:
+    out = tmp_path / "out"
+    code = main(["batch", str(meshes / "star.off"), "-o", str(out), flag, value, *TINY_FLAGS])
+    _one_line_error(capsys, code, message.replace("CORES", str(engine.cores())))
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("summary", ["kept", "lost"])
+def test_a_finished_item_with_a_corrupt_map_or_confidence_runs_again(
+    by_path, meshes: Path, cluster, tmp_path: Path, summary: str
+) -> None:
+    """A resumed batch takes a folder as done only when its per-vertex arrays read back,
+    whether the earlier summary lists it as done or not."""
+    out = tmp_path / "out"
+    shutil.copytree(by_path[0], out)
+    if summary == "lost":
+        (out / "summary.parquet").unlink()
+    truncated, zeroed = out / "star" / "symmetry_map.npy", out / "cubo" / "symmetry_confidence.npy"
+    truncated.write_bytes(truncated.read_bytes()[:100])
+    zeroed.write_bytes(bytes(zeroed.stat().st_size))
+    spot = _mtimes(out / "spot")
+    inputs = [str(meshes / name) for name in ("star.off", "cubo.off", "spot.obj")]
+    frame = intrinsym.batch(inputs, out, PARAMS, scheduler=cluster.scheduler_address).set_index("name")
+    assert list(frame.loc[["star", "cubo", "spot"], "status"]) == ["done", "done", "skipped"], frame["error"]
+    assert _mtimes(out / "spot") == spot
+    for name, file in (("star", "symmetry_map.npy"), ("cubo", "symmetry_confidence.npy")):
+        np.testing.assert_array_equal(np.load(out / name / file), np.load(by_path[0] / name / file))

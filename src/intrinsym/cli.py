@@ -445,7 +445,7 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"intrinsym: this run takes {estimate.describe()}", file=sys.stderr)
             show = not (args.quiet or args.json) and sys.stderr.isatty()
             progress = _Progress() if show else None
-            with progress or contextlib.nullcontext():
+            with resources.disk_room(args.out, estimate.disk), progress or contextlib.nullcontext():
                 if args.command == "detect":
                     result = pipeline.detect(inputs[0], p, progress=progress)
                 else:
@@ -573,6 +573,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     error, 130 on Ctrl-C, 143 on SIGTERM)."""
     args = build_parser().parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
+    except MemoryError as err:  # beyond the estimate that resources.check_run refuses up front
+        print(f"intrinsym: error: out of memory ({err or 'MemoryError'})", file=sys.stderr)
+        return 2
     try:
         return _run(args)
     except IntrinsymError as err:

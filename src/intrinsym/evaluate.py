@@ -75,7 +75,8 @@ def load_symmetry_map(
     Formats: TOSCA ``.sym`` (one 1-based index per line), KIDS ``sym.txt`` (1-based
     indices in ``%e`` notation, any whitespace) and ``.npy`` (0-based integers). With
     ``allow_missing``, -1 (0 in the 1-based formats) marks a vertex without an image,
-    as in ``symmetry_map.npy``.
+    as in ``symmetry_map.npy``, and -2 (-1) one that is not scored
+    (:data:`intrinsym.partial_truth.NOT_SCORED`).
 
     Raises
     ------
@@ -98,7 +99,7 @@ def load_symmetry_map(
     sym = values.astype(np.int64) - base
     if n_vertices is not None and len(sym) != n_vertices:
         raise InputError(f"{path}: symmetry map has {len(sym)} entries, the mesh {n_vertices} vertices")
-    if sym.min() < (-1 if allow_missing else 0) or sym.max() >= len(sym):
+    if sym.min() < (-2 if allow_missing else 0) or sym.max() >= len(sym):
         raise InputError(f"{path}: symmetry map index out of range")
     return sym
 

@@ -1,20 +1,28 @@
-"""How much memory this process can still use, and refusing work that would not fit.
+"""How much memory this process can still use and how much disk its result needs, and
+refusing work that would not fit.
 
 A job too large for the machine is reported as a :class:`~intrinsym.errors.ResourceError`
 (one line, like every user-facing error) before the allocation is attempted, instead
-of failing later with a ``MemoryError`` or being killed by the operating system.
+of failing later with a ``MemoryError`` or being killed by the operating system; a
+result set the disk has no room for, as an :class:`~intrinsym.errors.OutputError`
+before the run (:func:`check_disk`) or, should the disk fill up meanwhile, when it is
+written (:func:`disk_room`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
+import shutil
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import ResourceError, path_label
+from .errors import OutputError, ResourceError, path_label
 from .params import WORK_PER_SAMPLE
 
 if TYPE_CHECKING:
@@ -30,8 +38,8 @@ def available_memory() -> int | None:
 
     Uses Linux's ``MemAvailable`` (free memory plus reclaimable cache), capped
     by the memory limits of this process's cgroup and its ancestors (v1 or v2,
-    :func:`cgroup_room`), and falls back to
-    ``os.sysconf`` (available, then total physical pages) elsewhere.
+    :func:`cgroup_room`) and by its address-space limit (:func:`address_space_room`),
+    and falls back to ``os.sysconf`` (available, then total physical pages) elsewhere.
     """
     avail = None
     try:
@@ -51,10 +59,38 @@ def available_memory() -> int | None:
             if pages > 0 and page_size > 0:
                 avail = pages * page_size
                 break
-    room = cgroup_room()
-    if room is not None:
-        avail = room if avail is None else min(avail, room)
+    for room in (cgroup_room(), address_space_room()):
+        if room is not None:
+            avail = room if avail is None else min(avail, room)
     return avail
+
+
+def address_space_room() -> int | None:
+    """Bytes of address space this process may still map under its ``RLIMIT_AS`` limit
+    (``ulimit -v``, ``prlimit --as``, set by many cluster schedulers): the limit less
+    the address space mapped now; None without a limit.
+
+    Mapped space counts more than the memory used (libraries, thread stacks and
+    allocator arenas are mapped but mostly not touched), so this is an upper bound of
+    what the process can still allocate.
+    """
+    try:
+        import resource
+    except ImportError:  # no resource limits on this system
+        return None
+    limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if limit == resource.RLIM_INFINITY:
+        return None
+    return max(limit - _mapped_bytes(), 0)
+
+
+def _mapped_bytes() -> int:
+    """Bytes of address space this process maps now (``/proc/self/statm``; 0 where unknown)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text(encoding="ascii").split()[0])
+        return pages * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
 
 
 #: Where the cgroup file systems are mounted, and this process's cgroup membership.
@@ -140,6 +176,14 @@ def cgroup_room(root: Path | None = None, proc_cgroup: Path | None = None) -> in
     return min(rooms) if rooms else None
 
 
+def _available(avail: int) -> str:
+    """ "the 1.2 GB of memory available" (80 % of ``avail``), naming the address-space
+    limit when it is what binds."""
+    room = address_space_room()
+    limit = " under this process's address-space limit (ulimit -v)" if room is not None and room <= avail else ""
+    return f"the {format_bytes(0.8 * avail)} of memory available{limit}"
+
+
 def format_bytes(nbytes: float) -> str:
     """Human-readable size: GB down to 0.1 GB, then MB, kB, bytes."""
     if nbytes >= 1e8:
@@ -173,12 +217,8 @@ def check_memory(nbytes: int, what: str, path: str = "") -> None:
     avail = available_memory()
     if avail is None:
         return
-    usable = 0.8 * avail
-    if nbytes > usable:
-        raise ResourceError(
-            f"{path_label(path)}: {what} needs {nbytes / 1e9:.1f} GB, more than the "
-            f"{usable / 1e9:.1f} GB of memory available"
-        )
+    if nbytes > 0.8 * avail:
+        raise ResourceError(f"{path_label(path)}: {what} needs {format_bytes(nbytes)}, more than {_available(avail)}")
 
 
 @dataclass(frozen=True)
@@ -193,12 +233,15 @@ class Estimate:
         Wall-clock time on a 2-core machine (AMD EPYC), seconds.
     n_source, n_target : int
         The sample counts assumed.
+    disk : int
+        Bytes of the result set (:meth:`intrinsym.Result.save`), before compression.
     """
 
     nbytes: int
     seconds: float
     n_source: int
     n_target: int
+    disk: int = 0
 
     def describe(self) -> str:
         """One line: "about 12 min and 3.4 GB (|Ps| = 2000, |Pt| = 60000; approximate)"."""
@@ -233,7 +276,9 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     |Ps| neighbours per target); one iteration visits each edge's ring rows, about
     0.07 us sqrt(|Ps|) |Pt|^1.5, for ``TYPICAL_ITERATIONS`` per pass. Within 40 % of
     the measured time and 20 % of the memory on the runs of docs/benchmarks.md; a run
-    that needs many more BP iterations than the median takes longer.
+    that needs many more BP iterations than the median takes longer. The result set
+    holds the unary, the marginals of each pass and the target rings (12 bytes per
+    neighbour) as float32 |Ps| x |Pt| arrays, and about 100 bytes per input vertex.
 
     Parameters
     ----------
@@ -261,7 +306,8 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     iteration = 7e-8 * np.sqrt(s) * t**1.5
     bp = passes * min(p.iterations, TYPICAL_ITERATIONS) * iteration
     seconds = 2.0 + 1.6e-4 * work + 1e-8 * work * t + 8e-7 * s * t * terms + bp
-    return Estimate(nbytes, float(seconds), s, t)
+    disk = (2 + (passes if passes > 1 else 0)) * s * t * 4 + 276 * t * t // s + 100 * max(n_vertices, 1)
+    return Estimate(nbytes, float(seconds), s, t, int(disk))
 
 
 def check_run(n_vertices: int, p: Params, path: str = "", self_match: bool = True) -> Estimate:
@@ -277,8 +323,53 @@ def check_run(n_vertices: int, p: Params, path: str = "", self_match: bool = Tru
     avail = available_memory()
     if avail is not None and estimate.nbytes > 0.8 * avail:
         raise ResourceError(
-            f"{path_label(path)}: the run needs {estimate.describe()}, more than the "
-            f"{format_bytes(0.8 * avail)} of memory available; lower --target, then --source "
+            f"{path_label(path)}: the run needs {estimate.describe()}, more than {_available(avail)}; "
+            "lower --target, then --source "
             "(or raise --target-spacing, --source-spacing)"
         )
     return estimate
+
+
+def check_disk(out: str | os.PathLike, nbytes: int) -> None:
+    """Refuse a result set of ``nbytes`` that the file system of the result folder
+    ``out`` has no room for (the new set is written beside the old one, which stays
+    until the new one is whole).
+
+    Raises
+    ------
+    OutputError
+        Naming ``out``, the space needed and the space free.
+    """
+    folder = Path(out).absolute().parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:  # the folder's own check (files.check_output_dir) reports what is wrong
+        return
+    if nbytes > free:
+        raise OutputError(_no_room(out, nbytes, free))
+
+
+def _no_room(out: str | os.PathLike, nbytes: int, free: int) -> str:
+    return (
+        f"{path_label(out)}: not enough disk space for the result set: it needs about {format_bytes(nbytes)}, "
+        f"{format_bytes(free)} free"
+    )
+
+
+@contextlib.contextmanager
+def disk_room(out: str | os.PathLike, nbytes: int) -> Iterator[None]:
+    """:func:`check_disk`, then the ``with`` block, in which a full disk (or quota) is
+    reported as an :class:`~intrinsym.errors.OutputError` naming ``out`` and ``nbytes``
+    instead of an ``OSError`` (the earlier result set in ``out`` stays whole,
+    :func:`intrinsym.files.write_set`)."""
+    check_disk(out, nbytes)
+    try:
+        yield
+    except OSError as err:
+        if err.errno not in (errno.ENOSPC, errno.EDQUOT):
+            raise
+        try:
+            free = shutil.disk_usage(Path(out).absolute().parent).free
+        except OSError:
+            free = 0
+        raise OutputError(f"{_no_room(out, nbytes, free)} (the disk filled up while writing)") from None

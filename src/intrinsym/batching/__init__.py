@@ -20,8 +20,8 @@ from ..params import Params
 from ..pipeline import resolve_params
 from . import engine
 from .engine import ClusterPlan, Counts, Transport
-from .items import Item, collect, content_key, stored_key
-from .rows import base_row, row_of_folder
+from .items import Item, collect, content_key
+from .rows import base_row, finished_row
 from .work import AfterSave
 
 if TYPE_CHECKING:
@@ -48,6 +48,7 @@ def batch(
     group_by: str | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
+    host: str = engine.LOCAL_HOST,
     transport: Transport = "auto",
     force: bool = False,
     after_save: AfterSave | None = None,
@@ -83,7 +84,10 @@ def batch(
         Address of a running Dask scheduler (default ``$DASK_SCHEDULER_ADDRESS``, else a
         new local cluster sized by :func:`intrinsym.batching.engine.plan_cluster`).
     workers : int, optional
-        Workers of the local cluster (default: from the cores and the memory).
+        Workers of the local cluster, 1 to the cores (default: from the cores and the memory).
+    host : str
+        Where the local cluster's scheduler, workers and dashboard listen (default
+        127.0.0.1: this machine only; the dashboard has no authentication).
     transport : {"auto", "path", "bytes"}
         "path": the workers read the meshes and write the folders (a shared file system);
         "bytes": the client sends the meshes' bytes and writes the folders; "auto": path
@@ -106,7 +110,9 @@ def batch(
     Raises
     ------
     InputError, ParameterError
-        Inputs that name no mesh, an unreadable manifest, bad parameters.
+        Inputs that name no mesh, an unreadable manifest, an item name that is not a
+        plain folder name, bad parameters, a scheduler that is malformed or does not
+        answer (``out`` is then not created).
     KeyboardInterrupt
         After writing the summary of what finished (the rest as "interrupted").
     """
@@ -118,21 +124,24 @@ def batch(
     items = collect(paths, p, pairs=pairs, group_by=group_by)
     if transport not in ("auto", "path", "bytes"):
         raise ParameterError(f"transport must be auto, path or bytes, not {transport!r}")
+    engine.check_workers(workers)
+    engine.scheduler_address(scheduler)
     root = Path(out)
-    root.mkdir(parents=True, exist_ok=True)
     earlier = summary.previous_rows(root)
     rows: dict[str, dict[str, Any]] = {}
     jobs: list[tuple[Item, str]] = []
     for item in items:
         key = content_key(item)
-        if not force and stored_key(root / item.name) == key:
-            old = earlier.get((item.name, key))
-            rows[item.name] = {**old, "status": "skipped"} if old else row_of_folder(item, key, root / item.name)
-        else:
+        found = None if force else finished_row(item, key, root / item.name)
+        if found is None:
             jobs.append((item, key))
+        else:
+            old = earlier.get((item.name, key))
+            rows[item.name] = {**old, "status": "skipped"} if old else found
     say(f"{len(items)} items: {len(jobs)} to run, {len(rows)} done before (skipped)")
     if jobs:
-        _run(jobs, items, rows, root, scheduler, workers, transport, force, after_save, progress, say)
+        _run(jobs, items, rows, root, scheduler, workers, host, transport, force, after_save, progress, say)
+    root.mkdir(parents=True, exist_ok=True)
     frame = summary.table([rows[item.name] for item in items])
     summary.write(frame, root)
     return frame
@@ -145,21 +154,24 @@ def _run(
     root: Path,
     scheduler: str | None,
     workers: int | None,
+    host: str,
     transport: Transport,
     force: bool,
     after_save: AfterSave | None,
     progress: Callable[[Counts], None] | None,
     say: Callable[[str], None],
 ) -> None:
-    """Run the jobs, filling ``rows`` (the summary is rewritten every ``SUMMARY_EVERY``
+    """Run the jobs on the scheduler, or a local cluster of so many workers listening on
+    ``host``, filling ``rows`` (the summary is rewritten every ``SUMMARY_EVERY``
     seconds); on an interrupt write the summary with the items not finished as
-    "interrupted" before re-raising."""
+    "interrupted" before re-raising. Creates ``root`` once the cluster answers."""
     from . import summary
 
     plan = engine.plan_cluster([item for item, _ in jobs], workers=workers)
-    client, cluster = engine.connect(plan, scheduler)
+    client, cluster = engine.connect(plan, scheduler, host)
     written = time.monotonic()
     try:
+        root.mkdir(parents=True, exist_ok=True)
         say(engine.describe_cluster(client, cluster, plan))
         how = engine.choose_transport(client, transport, root, [item for item, _ in jobs])
         say(

@@ -16,7 +16,7 @@ from rich.table import Table
 
 from ..errors import ParameterError
 from ..params import make_params
-from . import batch, report
+from . import batch, engine, report
 from .engine import Counts
 from .work import AfterSave
 
@@ -47,7 +47,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="a running Dask scheduler, e.g. tcp://host:8786 (default: $DASK_SCHEDULER_ADDRESS, else a "
         "local cluster sized from the cores and the memory)",
     )
-    p.add_argument("--workers", type=int, help="workers of the local cluster (default: from cores and memory)")
+    p.add_argument(
+        "--workers", type=int, help="workers of the local cluster, 1 to the cores (default: from cores and memory)"
+    )
+    p.add_argument(
+        "--host",
+        default=engine.LOCAL_HOST,
+        help="where the local cluster's scheduler, workers and dashboard listen (default: %(default)s, this "
+        "machine only; the dashboard has no authentication, so choose another interface only on a trusted network)",
+    )
     how = p.add_mutually_exclusive_group()
     how.add_argument(
         "--send-bytes",
@@ -129,6 +137,7 @@ def _print_report(out: str, show: bool) -> dict[str, Any]:
 def run(args: argparse.Namespace, overrides: dict[str, Any], after_save: AfterSave | None) -> int:
     """Run ``intrinsym batch``; exit code 0, or 1 when an item failed."""
     if not args.inputs and not args.report:
+    engine.check_workers(args.workers, "--workers")
         raise ParameterError("batch needs INPUT... (or --report to report on OUT)")
     quiet = args.quiet or args.json
     console = Console(stderr=True, quiet=quiet)
@@ -145,6 +154,7 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], after_save: AfterSa
                 pairs=args.pairs,
                 group_by=args.group_by,
                 scheduler=args.scheduler,
+                host=args.host,
                 workers=args.workers,
                 transport=args.transport,
                 force=args.force,

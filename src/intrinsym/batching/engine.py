@@ -12,14 +12,16 @@ from __future__ import annotations
 import logging
 import math
 import os
+import socket
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..pipeline import _model_bytes
 from ..resources import available_memory, format_bytes
 from .items import Item
@@ -41,6 +43,12 @@ MODEL_MARGIN = 2
 IN_FLIGHT_PER_THREAD = 2
 #: The environment variables that size a worker's thread pools.
 THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+#: Where a local cluster's scheduler, workers and dashboard listen unless asked otherwise:
+#: this machine only (the dashboard has no authentication).
+LOCAL_HOST = "127.0.0.1"
+#: Seconds to wait for a scheduler's port to accept a connection, then for its handshake.
+PORT_SECONDS = 5
+HANDSHAKE_SECONDS = 30
 
 
 @dataclass(frozen=True)
@@ -115,35 +123,115 @@ def plan_cluster(
     return ClusterPlan(workers, max(1, n_cores // workers), int(memory // workers), need)
 
 
+def check_workers(workers: int | None, name: str = "workers") -> None:
+    """Refuse a number of local workers outside [1, cores]: each is a process running
+    one item at a time on its own core; more than the cores only start slower.
+
+    Raises
+    ------
+    ParameterError
+        Naming ``name`` (the option) and the bounds.
+    """
+    if workers is not None and not 1 <= workers <= cores():
+        raise ParameterError(f"{name} must lie in [1, {cores()}] (the cores this process may use), not {workers}")
+
+
+class Scheduler(NamedTuple):
+    """A running scheduler to use: its address, what named it (for messages) and, for
+    the TCP-based protocols, the host and port to reach."""
+
+    address: str
+    name: str
+    endpoint: tuple[str, int] | None
+
+
+def scheduler_address(scheduler: str | None) -> Scheduler | None:
+    """The scheduler to use, ``scheduler`` or else ``$DASK_SCHEDULER_ADDRESS``; None for
+    a new local cluster.
+
+    Raises
+    ------
+    ParameterError
+        When the address is not a Dask address (``tcp://HOST:PORT`` and the like).
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    if scheduler:
+        address, name = scheduler, "--scheduler"
+    elif os.environ.get("DASK_SCHEDULER_ADDRESS"):
+        address, name = os.environ["DASK_SCHEDULER_ADDRESS"], "$DASK_SCHEDULER_ADDRESS"
+    else:
+        return None
+    try:
+        scheme, location = parse_address(address)
+        if scheme not in ("tcp", "tls", "ws", "wss"):
+            return Scheduler(address, name, None)
+        host, port = parse_host_port(location)
+        if not 0 < int(port) < 65536:
+            raise ValueError(f"port {port} out of range")
+    except (ValueError, TypeError) as err:
+        reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+        raise ParameterError(
+            f"{name} {address!r}: not a scheduler address ({reason}); expected tcp://HOST:PORT"
+        ) from None
+    return Scheduler(address, name, (host, int(port)))
+
+
+def _reach(scheduler: Scheduler) -> None:
+    """Refuse a scheduler whose port does not accept a connection within
+    ``PORT_SECONDS`` (nothing listens, an unknown host, a firewall)."""
+    if scheduler.endpoint is None:
+        return
+    try:
+        socket.create_connection(scheduler.endpoint, timeout=PORT_SECONDS).close()
+    except OSError as err:
+        reason = err.strerror or str(err) or type(err).__name__
+        raise ParameterError(f"{scheduler.name} {scheduler.address}: no scheduler answers there ({reason})") from None
+
+
 def thread_environment(threads: int) -> dict[str, str]:
     """Environment of a worker process with ``threads`` Numba / OpenMP / BLAS threads."""
     return {name: str(threads) for name in THREAD_VARIABLES}
 
 
-def connect(plan: ClusterPlan, scheduler: str | None) -> tuple[Any, Any]:
+def connect(plan: ClusterPlan, scheduler: str | None, host: str = LOCAL_HOST) -> tuple[Any, Any]:
     """A Dask client on ``scheduler`` (or ``$DASK_SCHEDULER_ADDRESS``), else on a new
-    local cluster of ``plan``.
+    local cluster of ``plan`` whose scheduler, workers and dashboard listen on ``host``.
 
     Returns
     -------
     client : distributed.Client
     cluster : distributed.LocalCluster or None
         The cluster started here (None for an existing scheduler).
+
+    Raises
+    ------
+    ParameterError
+        A scheduler address that is malformed, or where no scheduler answers.
     """
     import dask
     from distributed import Client, LocalCluster
+    from distributed.comm.addressing import unparse_host_port
 
-    address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
-    if address:
-        return Client(address, timeout="30s"), None
+    running = scheduler_address(scheduler)
+    if running is not None:
+        _reach(running)
+        try:
+            return Client(running.address, timeout=f"{HANDSHAKE_SECONDS}s"), None
+        except (OSError, TimeoutError, ValueError) as err:
+            reason = next(iter(str(err).splitlines()), type(err).__name__)
+            raise ParameterError(
+                f"{running.name} {running.address}: not a Dask scheduler, or it does not answer ({reason})"
+            ) from None
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
         cluster = LocalCluster(
             n_workers=plan.workers,
             threads_per_worker=1,
             processes=True,
+            host=host,
             memory_limit=plan.memory_limit,
             env=thread_environment(plan.threads),
-            dashboard_address=":0",
+            dashboard_address=unparse_host_port(host, 0),
             silence_logs=logging.ERROR,
         )
     return Client(cluster), cluster

@@ -32,6 +32,8 @@ SIDE_FILES = (".sym.npy", ".maps.npy", ".labels.npy")
 MANIFEST_COLUMNS = ("mesh", "source", "target", "symmetry_map", "labels", "class", "name")
 #: Files of a complete result folder (``Result.save``).
 RESULT_FILES = ("result.npz", "run.json", "symmetries.json", "symmetry_map.npy")
+#: Files a batch writes in its output folder beside the item folders.
+BATCH_FILES = ("summary.parquet", "summary.csv", "report.png")
 
 
 @dataclass(frozen=True)
@@ -140,7 +142,7 @@ def read_manifest(path: str, extra: Sequence[str] = ()) -> list[dict[str, Any]]:
         raise InputError(f"{path}: the manifest needs a 'mesh' column (pairs: 'source' and 'target')")
     base = Path(path).resolve().parent
     rows = []
-    for record in table.to_dict("records"):
+    for line, record in enumerate(table.to_dict("records"), start=2):
         row: dict[str, Any] = {"params": {}}
         for column, text in record.items():
             text = str(text).strip()
@@ -154,12 +156,34 @@ def read_manifest(path: str, extra: Sequence[str] = ()) -> list[dict[str, Any]]:
             elif column in ("mesh", "source", "target", "symmetry_map", "labels"):
                 row[column] = str((base / text).resolve())
             else:
+            elif column == "name" and not plain_name(text):
+                raise _name_error(text, f"{path}: line {line}")
                 row[column] = text
         rows.append(row)
     return rows
 
 
 def _folder_names(paths: Sequence[str]) -> list[str]:
+def plain_name(name: str) -> bool:
+    """Whether ``name`` is a plain folder name in the batch's folder: one path component,
+    not ``.`` or ``..``, not hidden (``.NAME`` would meet the result set's temporaries
+    and lock) and none of the batch's own files (:data:`BATCH_FILES`)."""
+    separators = {"/", "\\", os.sep, os.altsep or "/", "\0"}
+    return (
+        name != ""
+        and not name.startswith(".")
+        and not any(sep in name for sep in separators)
+        and name not in BATCH_FILES
+    )
+
+
+def _name_error(name: str, where: str) -> InputError:
+    return InputError(
+        f"{where}: name {name!r} is not a plain folder name (one name in OUT: no / or \\, not . or .. "
+        f"or hidden, not {', '.join(BATCH_FILES)})"
+    )
+
+
     """A folder name per path: the file name without suffix, or, where two stems clash,
     the path relative to the common parent with ``__`` for the separators."""
     stems = [Path(p).name.split(".")[0] for p in paths]
@@ -241,6 +265,8 @@ def collect(inputs: Sequence[str], params: Params, pairs: bool = False, group_by
     seen: set[str] = set()
     for item in items:
         if item.name in seen:
+        if not plain_name(item.name):
+            raise _name_error(item.name, item.mesh)
             raise ParameterError(f"two items share the output folder {item.name!r}: give the manifest a 'name' column")
         seen.add(item.name)
     return items

@@ -16,10 +16,11 @@ from typing import Any
 import numpy as np
 
 from .. import evaluate
+from ..errors import IntrinsymError
 from ..io import load
 from ..result import Result, saved_global_confidence
 from ..runinfo import RunInfo
-from .items import Item
+from .items import Item, stored_key
 
 #: Columns of the summary, in order (stage seconds are inserted after "seconds").
 COLUMNS = (
@@ -62,6 +63,8 @@ COLUMNS = (
     "confidence_ece",
 )
 #: Scores of ``intrinsym evaluate`` that become columns: marginal scores, then the map's.
+#: Per-vertex arrays of a result folder, one value per input vertex.
+VERTEX_ARRAYS = ("symmetry_map.npy", "symmetry_mass.npy", "symmetry_confidence.npy")
 MARGINAL_SCORES = ("mirror_hit", "peak_recall", "decoy_recall", "breadth")
 MAP_SCORES = ("within_0.05", "within_0.10", "area_within_0.05", "area_within_0.10", "mean_error", "coverage")
 
@@ -157,6 +160,21 @@ def row_of_folder(item: Item, key: str, folder: Path, status: str = "skipped") -
 
 
 def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> dict[str, Any]:
+def finished_row(item: Item, key: str, folder: Path, status: str = "skipped") -> dict[str, Any] | None:
+    """:func:`row_of_folder` of a folder that holds a complete result with the content key
+    ``key``; None when it holds none, or when one of its files cannot be read (a
+    truncated or overwritten ``symmetry_map.npy`` or ``symmetry_confidence.npy``, one
+    per-vertex array of another length than the others): the item is to run again."""
+    if stored_key(folder) != key:
+        return None
+    try:
+        row = row_of_folder(item, key, folder, status)
+        lengths = {len(np.load(folder / name, mmap_mode="r")) for name in VERTEX_ARRAYS if (folder / name).is_file()}
+    except (OSError, ValueError, EOFError, KeyError, TypeError, IntrinsymError):
+        return None
+    return row if lengths == {row["vertices"]} else None
+
+
     """``intrinsym evaluate``'s report of a result (:func:`intrinsym.evaluate.evaluation_report`).
 
     Parameters

@@ -18,8 +18,8 @@ from typing import Any
 from .. import evaluate, pipeline
 from ..errors import IntrinsymError
 from ..result import Result
-from .items import Item, stored_key
-from .rows import base_row, row_of_folder, row_of_result, score
+from .items import Item
+from .rows import base_row, finished_row, row_of_result, score
 
 #: Called with an item's folder once its result is saved (``intrinsym batch --figures``).
 AfterSave = Callable[[Path], Any]
@@ -118,9 +118,9 @@ def _attempt(
     files: dict[str, bytes] | None,
     after_save: AfterSave | None,
 ) -> Outcome:
-    if reusable is not None and stored_key(Path(reusable)) == key:
-        # a previous attempt of this item wrote it and its worker died before reporting
-        return Outcome(row_of_folder(item, key, Path(reusable), status="done"))
+    done = None if reusable is None else finished_row(item, key, Path(reusable), status="done")
+    if done is not None:  # a previous attempt of this item wrote it and its worker died before reporting
+        return Outcome(done)
     with local_files(files) as local:
         result, scores = _compute(item, local)
     result = dataclasses.replace(result, info=dataclasses.replace(result.info, content_key=key))

@@ -1,0 +1,264 @@
+"""Partial symmetry on the SHREC'16 cuts and holes, beside "no partner anywhere" and pyFM.
+
+Runs the default :func:`intrinsym.detect` (seed 0) on every partial shape of
+``shrec16_partial/{cuts,holes}`` and scores its ``symmetry_map`` with the protocol of
+:mod:`intrinsym.partial_truth` (distances in units of sqrt(area) of the null shape):
+the partnered share within 0.05 and 0.10, the unpartnered share left unmapped, their
+balance (mean of the first and the third) and the IoU of the best-ranked symmetry's
+parts with the truth's partnered vertices. Beside it, two baselines: "no partner
+anywhere" (every vertex -1) and the peer a user would pick, pyFM's orientation-reversing
+self-map (PyPI ``pyfmaps``: WKS, ``fit(w_orient=1, orient_reversing=True)``, ZoomOut
+20 -> 100), which maps every vertex. Command::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/partial.py --data DATA [--cache DIR --tag TAG]
+        [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [-o TABLE.md]
+
+``DATA`` holds ``shrec16_partial/`` (default ``$INTRINSYM_DATA``; skipped, exit 0, when
+absent). ``--shapes`` takes shape names (``cuts_cat_shape_1``) or prefixes (``cuts``,
+``holes_dog``). ``--cache DIR`` keeps one JSON file per shape and method
+(``DIR/<shape>.<method>.json``), reused when its tag, version and parameters match, so
+an interrupted run resumes; pyFM's rows are kept across tags. ``--jobs N`` runs N shapes
+at once in separate processes.
+
+Output: one Markdown table, a row per shape, then the mean and worst rows per kind
+(cuts / holes), per class and over all shapes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import traceback
+from collections.abc import Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+import intrinsym
+from _data import add_data_argument, data_folder, no_data
+from intrinsym import partial_truth, records
+from tosca import _clean_floats, _machine, _overrides
+
+#: Cache-format revision: a file with another one is recomputed.
+CACHE_FORMAT = 1
+#: Scores of a row, with their table headers.
+SCORES = (
+    ("balanced", "balanced"),
+    ("partnered_within_005", "partnered ≤0.05"),
+    ("partnered_within_010", "partnered ≤0.10"),
+    ("unpartnered_unmapped", "unpartnered unmapped"),
+    ("iou", "IoU best"),
+)
+
+
+def shapes(data: Path) -> list[Path]:
+    """Every partial shape under ``data/shrec16_partial``, cuts then holes, by class and number."""
+
+    def key(p: Path) -> tuple:
+        kind, cls, _, k = p.stem.split("_")
+        return kind, cls, int(k)
+
+    return sorted((data / "shrec16_partial").glob("*/*_shape_*.off"), key=key)
+
+
+def select(found: list[Path], names: list[str] | None) -> list[Path]:
+    """The shapes named (exactly, or by a prefix of their name)."""
+    if not names:
+        return found
+    return [p for p in found if any(p.stem == n or p.stem.startswith(n + "_") for n in names)]
+
+
+def pyfm_map(shape: intrinsym.Shape) -> np.ndarray:
+    """(N,) int64: pyFM's orientation-reversing self-map of ``shape`` (WKS, ZoomOut 20 -> 100)."""
+    from pyFM.functional import FunctionalMapping
+    from pyFM.mesh import TriMesh
+
+    mesh = TriMesh(np.asarray(shape.vertices), np.asarray(shape.faces))
+    model = FunctionalMapping(mesh, mesh)
+    model.preprocess(n_descr=100, descr_type="WKS", subsample_step=5, k_process=100, verbose=False)
+    model.fit(K=(20, 20), w_descr=1.0, w_lap=1e-2, w_dcomm=1e-1, w_orient=1.0, orient_reversing=True, verbose=False)
+    model.zoomout_refine(nit=16, step=5, verbose=False)
+    return np.asarray(model.get_p2p(), dtype=np.int64)
+
+
+def best_parts(result: intrinsym.Result, n: int) -> np.ndarray | None:
+    """(n,) bool: the input vertices of the best-ranked symmetry's two parts; None without one."""
+    if result.extraction is None or result.support is None or not result.extraction.symmetries:
+        return None
+    best = records.records(
+        result.extraction.symmetries[:1], result.source_point_vertex, result.target_point_vertex, result.support
+    )[0]
+    mask = np.zeros(n, dtype=bool)
+    for part in records.part_vertices(best):
+        mask[part] = True
+    return mask
+
+
+def run(path: Path, method: str, overrides: Mapping) -> dict:
+    """One shape scored under ``method`` ("intrinsym", "none" or "pyfm")."""
+    shape, truth = partial_truth.load_shrec16(path)
+    row: dict = {"shape": path.stem, "method": method, "vertices": len(shape.vertices)}
+    row["partnered_share"] = float(truth.partnered.mean())
+    start = time.perf_counter()
+    iou = float("nan")
+    if method == "none":
+        vmap = np.full(len(shape.vertices), -1, dtype=np.int64)
+    elif method == "pyfm":
+        vmap = pyfm_map(shape)
+        iou = partial_truth.part_iou(np.ones(len(vmap), dtype=bool), truth)
+    else:
+        result = intrinsym.detect(shape, intrinsym.make_params(**overrides))
+        vmap = result.symmetry_map()
+        parts = best_parts(result, len(vmap))
+        iou = 0.0 if parts is None else partial_truth.part_iou(parts, truth)
+        row["coverage"] = float((vmap >= 0).mean())
+    row["seconds"] = time.perf_counter() - start
+    row.update(partial_truth.score_partial(vmap, shape, truth).as_dict(), iou=iou)
+    return row
+
+
+def _cache_file(cache: Path, path: Path, method: str) -> Path:
+    return cache / f"{path.stem}.{method}.json"
+
+
+def _key(method: str, tag: str | None, overrides: Mapping) -> dict:
+    if method != "intrinsym":
+        return {"method": method, "cache_format": CACHE_FORMAT}
+    return {
+        "method": method,
+        "tag": tag,
+        "version": intrinsym.__version__,
+        "overrides": dict(overrides),
+        "cache_format": CACHE_FORMAT,
+    }
+
+
+def _cached(cache: Path | None, path: Path, method: str, key: dict) -> dict | None:
+    if cache is None or not _cache_file(cache, path, method).is_file():
+        return None
+    row = json.loads(_cache_file(cache, path, method).read_text())
+    return row if all(row.get(k) == v for k, v in key.items()) else None
+
+
+def _work(path: Path, method: str, cache: Path | None, key: dict, overrides: Mapping) -> dict:
+    """Worker: one shape and method, written to the cache (atomically) when there is one."""
+    try:
+        row = {**run(path, method, overrides), **key, "machine": _machine()}
+    except Exception as err:  # a failed shape is a row, not the end of the run
+        row = {"shape": path.stem, "method": method, "error": f"{type(err).__name__}: {err}"}
+        traceback.print_exc()
+    row = _clean_floats(row)
+    if cache is not None and "error" not in row:
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = cache / f".{path.stem}.{method}.tmp{os.getpid()}"
+        tmp.write_text(json.dumps(row, indent=1))
+        os.replace(tmp, _cache_file(cache, path, method))
+    return row
+
+
+def _group(stem: str) -> tuple[str, str]:
+    kind, cls, _, _ = stem.split("_")
+    return kind, cls
+
+
+def _value(row: dict | None, key: str) -> float:
+    value = None if row is None else row.get(key)
+    return float("nan") if value is None else float(value)
+
+
+def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:
+    """The table: a row per shape, then mean and worst per kind, per class and overall."""
+    head = ["shape", "partnered share"]
+    for key, label in SCORES:
+        head += [f"{label} ({m})" for m in methods if not (key == "iou" and m == "none")]
+    head += ["seconds (intrinsym)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def cells(name_rows: list[str], agg) -> list[str]:
+        out = [f"{agg(np.array([_value(rows.get((n, 'intrinsym')), 'partnered_share') for n in name_rows])):.3f}"]
+        for key, _ in SCORES:
+            for m in methods:
+                if key == "iou" and m == "none":
+                    continue
+                values = np.array([_value(rows.get((n, m)), key) for n in name_rows])
+                out.append("–" if np.all(np.isnan(values)) else f"{agg(values):.3f}")
+        seconds = np.array([_value(rows.get((n, "intrinsym")), "seconds") for n in name_rows])
+        out.append(f"{np.nanmax(seconds) if agg is np.nanmin else np.nanmean(seconds):.1f}")
+        return out
+
+    for n in names:
+        lines.append("| " + " | ".join([n, *cells([n], np.nanmean)]) + " |")
+    groups: dict[str, list[str]] = {}
+    for n in names:
+        kind, cls = _group(n)
+        for g in (kind, cls, f"{kind} {cls}", "all"):
+            groups.setdefault(g, []).append(n)
+    for g, members in groups.items():
+        if len(members) > 1:
+            lines.append("| " + " | ".join([f"**mean {g}** ({len(members)})", *cells(members, np.nanmean)]) + " |")
+            lines.append("| " + " | ".join([f"worst {g}", *cells(members, np.nanmin)]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_data_argument(parser)
+    parser.add_argument("--shapes", nargs="+", metavar="NAME", help="shape names or prefixes (default: all)")
+    parser.add_argument("--jobs", type=int, default=1, help="shapes run at once (default 1)")
+    parser.add_argument("--cache", type=Path, help="folder of per-shape JSON results, reused when present")
+    parser.add_argument("--tag", help="code tag recorded in (and required of) the cached results")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="a Params field changed")
+    parser.add_argument("--no-pyfm", action="store_true", help="leave out the pyFM baseline")
+    parser.add_argument("-o", "--out", type=Path, help="also write the Markdown table here")
+    args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.error("--jobs must be at least 1")
+    try:
+        overrides = _overrides(args.param)
+    except intrinsym.ParameterError as err:
+        parser.error(f"--param {err}")
+    data = data_folder(args.data)
+    if data is None or not (data / "shrec16_partial").is_dir():
+        print(no_data("partial.py", args.data))
+        return 0
+    todo = select(shapes(data), args.shapes)
+    methods = ["intrinsym", "none"] + ([] if args.no_pyfm else ["pyfm"])
+    rows: dict[tuple[str, str], dict] = {}
+    pending = []
+    for path in todo:
+        for method in methods:
+            key = _key(method, args.tag, overrides)
+            row = _cached(args.cache, path, method, key)
+            if row is not None:
+                rows[path.stem, method] = row
+            else:
+                pending.append((path, method, key))
+    start = time.perf_counter()
+
+    def done(row: dict) -> None:
+        rows[row["shape"], row["method"]] = row
+        status = row.get("error") or f"balanced {_value(row, 'balanced'):.3f}, {_value(row, 'seconds'):.1f} s"
+        print(f"{row['shape']} {row['method']}: {status} [{time.perf_counter() - start:.0f} s]", file=sys.stderr)
+
+    if args.jobs == 1:
+        for path, method, key in pending:
+            done(_work(path, method, args.cache, key, overrides))
+    else:
+        with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
+            futures = [pool.submit(_work, path, method, args.cache, key, overrides) for path, method, key in pending]
+            for future in as_completed(futures):
+                done(future.result())
+    table = markdown(rows, [p.stem for p in todo], methods)
+    print(table, end="")
+    if args.out:
+        args.out.write_text(table)
+    return 1 if any("error" in r for r in rows.values()) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
