@@ -573,13 +573,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     error, 130 on Ctrl-C, 143 on SIGTERM)."""
     args = build_parser().parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
-    except MemoryError as err:  # beyond the estimate that resources.check_run refuses up front
-        print(f"intrinsym: error: out of memory ({err or 'MemoryError'})", file=sys.stderr)
-        return 2
     try:
         return _run(args)
     except IntrinsymError as err:
         print(f"intrinsym: error: {err}", file=sys.stderr)
+        return 2
+    except MemoryError as err:  # beyond the estimate that resources.check_run refuses up front
+        print(f"intrinsym: error: out of memory ({err or 'MemoryError'})", file=sys.stderr)
         return 2
     except Terminated:
         print("intrinsym: terminated", file=sys.stderr)

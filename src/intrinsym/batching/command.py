@@ -137,8 +137,8 @@ def _print_report(out: str, show: bool) -> dict[str, Any]:
 def run(args: argparse.Namespace, overrides: dict[str, Any], after_save: AfterSave | None) -> int:
     """Run ``intrinsym batch``; exit code 0, or 1 when an item failed."""
     if not args.inputs and not args.report:
-    engine.check_workers(args.workers, "--workers")
         raise ParameterError("batch needs INPUT... (or --report to report on OUT)")
+    engine.check_workers(args.workers, "--workers")
     quiet = args.quiet or args.json
     console = Console(stderr=True, quiet=quiet)
     output: dict[str, Any] = {"out": args.out}
@@ -154,8 +154,8 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], after_save: AfterSa
                 pairs=args.pairs,
                 group_by=args.group_by,
                 scheduler=args.scheduler,
-                host=args.host,
                 workers=args.workers,
+                host=args.host,
                 transport=args.transport,
                 force=args.force,
                 after_save=after_save,

@@ -155,15 +155,14 @@ def read_manifest(path: str, extra: Sequence[str] = ()) -> list[dict[str, Any]]:
                     raise ParameterError(f"{path}: manifest column {err}") from None
             elif column in ("mesh", "source", "target", "symmetry_map", "labels"):
                 row[column] = str((base / text).resolve())
-            else:
             elif column == "name" and not plain_name(text):
                 raise _name_error(text, f"{path}: line {line}")
+            else:
                 row[column] = text
         rows.append(row)
     return rows
 
 
-def _folder_names(paths: Sequence[str]) -> list[str]:
 def plain_name(name: str) -> bool:
     """Whether ``name`` is a plain folder name in the batch's folder: one path component,
     not ``.`` or ``..``, not hidden (``.NAME`` would meet the result set's temporaries
@@ -184,6 +183,7 @@ def _name_error(name: str, where: str) -> InputError:
     )
 
 
+def _folder_names(paths: Sequence[str]) -> list[str]:
     """A folder name per path: the file name without suffix, or, where two stems clash,
     the path relative to the common parent with ``__`` for the separators."""
     stems = [Path(p).name.split(".")[0] for p in paths]
@@ -264,9 +264,9 @@ def collect(inputs: Sequence[str], params: Params, pairs: bool = False, group_by
         items = _pair_items(rows, params, group_by)
     seen: set[str] = set()
     for item in items:
-        if item.name in seen:
         if not plain_name(item.name):
             raise _name_error(item.name, item.mesh)
+        if item.name in seen:
             raise ParameterError(f"two items share the output folder {item.name!r}: give the manifest a 'name' column")
         seen.add(item.name)
     return items

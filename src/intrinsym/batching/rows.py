@@ -62,9 +62,9 @@ COLUMNS = (
     "truth_distortion",
     "confidence_ece",
 )
-#: Scores of ``intrinsym evaluate`` that become columns: marginal scores, then the map's.
 #: Per-vertex arrays of a result folder, one value per input vertex.
 VERTEX_ARRAYS = ("symmetry_map.npy", "symmetry_mass.npy", "symmetry_confidence.npy")
+#: Scores of ``intrinsym evaluate`` that become columns: marginal scores, then the map's.
 MARGINAL_SCORES = ("mirror_hit", "peak_recall", "decoy_recall", "breadth")
 MAP_SCORES = ("within_0.05", "within_0.10", "area_within_0.05", "area_within_0.10", "mean_error", "coverage")
 
@@ -159,7 +159,6 @@ def row_of_folder(item: Item, key: str, folder: Path, status: str = "skipped") -
     return result_row(item, key, status, RunInfo.from_dict(run), found, vertices, scores, conf)
 
 
-def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> dict[str, Any]:
 def finished_row(item: Item, key: str, folder: Path, status: str = "skipped") -> dict[str, Any] | None:
     """:func:`row_of_folder` of a folder that holds a complete result with the content key
     ``key``; None when it holds none, or when one of its files cannot be read (a
@@ -175,6 +174,7 @@ def finished_row(item: Item, key: str, folder: Path, status: str = "skipped") ->
     return row if lengths == {row["vertices"]} else None
 
 
+def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> dict[str, Any]:
     """``intrinsym evaluate``'s report of a result (:func:`intrinsym.evaluate.evaluation_report`).
 
     Parameters
