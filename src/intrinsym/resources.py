@@ -177,8 +177,8 @@ def cgroup_room(root: Path | None = None, proc_cgroup: Path | None = None) -> in
 
 
 def _available(avail: int) -> str:
-    """ "the 1.2 GB of memory available" (80 % of ``avail``), naming the address-space
-    limit when it is what binds."""
+    """The phrase "the 1.2 GB of memory available" (80 % of ``avail``), naming the
+    address-space limit when it is what binds."""
     room = address_space_room()
     limit = " under this process's address-space limit (ulimit -v)" if room is not None and room <= avail else ""
     return f"the {format_bytes(0.8 * avail)} of memory available{limit}"
