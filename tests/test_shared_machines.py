@@ -19,6 +19,7 @@ from numba.core.caching import _CacheLocator
 import intrinsym
 from conftest import sphere_result
 from intrinsym import _dijkstra, cli, pipeline
+from intrinsym.batching.engine import thread_environment
 
 SRC = Path(intrinsym.__file__).parent
 
@@ -114,7 +115,8 @@ def test_an_address_space_limit_is_refused_before_any_work(tmp_path: Path) -> No
 
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "intrinsym", "detect", "--example", "-o", str(out), "--target", "8000"]
-    p = subprocess.run(argv, preexec_fn=limit, capture_output=True, text=True, timeout=120)
+    env = {**os.environ, **thread_environment(1)}  # BLAS maps buffers per thread: as on a one-core job
+    p = subprocess.run(argv, env=env, preexec_fn=limit, capture_output=True, text=True, timeout=120)
     _one_line_error(p.returncode, p.stderr, "the run needs about", "address-space limit (ulimit -v)", "lower --target")
     assert list(tmp_path.iterdir()) == []
 
