@@ -30,10 +30,10 @@ def test_every_field_has_help_group_and_a_flag():
     assert [f.name for f in fields] == [f.name for f in dataclasses.fields(Params)]
     for f in fields:
         assert f.help and f.group in params.GROUPS, f.name
-        assert f.flag in detect, f.flag
+        assert (f.flag in detect) != f.match_only, f.flag
         assert (f.flag in match) != f.self_match, f.flag
         if f.kind is bool:
-            assert f.off_flag in detect
+            assert f.off_flag in detect or f.match_only
 
 
 def test_parameter_docs_are_generated_from_params():

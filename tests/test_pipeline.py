@@ -295,7 +295,9 @@ def test_match_two_shapes(tmp_path):
     a = bumpy_shape()
     rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     moved = Shape(a.vertices @ rot.T * 3.0, a.faces)
-    params = intrinsym.make_params(n_source=30, n_target=1500, spin_radius=0.2, spin_cloud=20000, iterations=10)
+    params = intrinsym.make_params(
+        n_source=30, n_target=1500, spin_radius=0.2, spin_cloud=20000, iterations=10, match_scale="each"
+    )
     r = intrinsym.match(a, moved, params)
     assert r.marginals.shape == (30, 1500)
     assert r.zoomout_map is None and r.info.zoomout is None

@@ -77,7 +77,7 @@ def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
     )
     groups = {name: p.add_argument_group(f"{name} options") for name in params.GROUPS}
     for f in params.describe():
-        if f.self_match and not self_match:
+        if f.self_match and not self_match or f.match_only and self_match:
             continue
         group = groups[f.group]
         if f.kind is bool:

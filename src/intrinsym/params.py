@@ -24,6 +24,7 @@ Backend = Literal["auto", "cpu", "gpu"]
 DType = Literal["float32", "float64"]
 Potential = Literal["calibrated", "paper"]
 Calibration = Literal["local", "both", "offset", "descriptor"]
+MatchScale = Literal["larger", "each"]
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
@@ -97,12 +98,13 @@ def _p(
     flag: str | None = None,
     off_flag: str | None = None,
     self_match: bool = False,
+    match_only: bool = False,
 ) -> Any:
     """A :class:`Params` field with its documentation.
 
     ``flag`` overrides the command-line option (default ``--field-name``); ``off_flag``
     names a boolean's negative option (default ``--no-...``); ``self_match`` marks a
-    field that only ``detect`` uses.
+    field that only ``detect`` uses, ``match_only`` one that only ``match`` uses.
     """
     meta = {
         "help": help,
@@ -112,6 +114,7 @@ def _p(
         "flag": flag,
         "off_flag": off_flag,
         "self_match": self_match,
+        "match_only": match_only,
     }
     return dataclasses.field(default=default, metadata=meta)
 
@@ -146,6 +149,15 @@ class Params:
     source_spacing: float | None = _p(None, "Poisson-disc radius of Ps, instead of a count", "sampling", unit=AREA)
     target_spacing: float | None = _p(None, "Poisson-disc radius of Pt, instead of a count", "sampling", unit=AREA)
     seed: int = _p(0, "random seed of the sampling and the BP orders", "sampling")
+    match_scale: MatchScale = _p(
+        "larger",
+        "common unit of length of the two shapes: 'larger' divides both by sqrt(area) of the larger one, "
+        "keeping their relative size (inputs in the same units: a part matched to a whole); 'each' "
+        "normalises each to unit area (the same object in different units)",
+        "sampling",
+        flag="--scale",
+        match_only=True,
+    )
     spin_bins: int = _p(16, "spin image size in bins per side", "unary", paper="not stated")
     spin_radius: float = _p(
         0.25,
@@ -501,6 +513,8 @@ class Field:
     paper, unit : str or None
     self_match : bool
         Only ``detect`` uses it.
+    match_only : bool
+        Only ``match`` uses it.
     """
 
     name: str
@@ -516,6 +530,7 @@ class Field:
     paper: str | None
     unit: str | None
     self_match: bool
+    match_only: bool
 
     def parse(self, text: str) -> Any:
         """The value a text (a manifest cell, ``NAME=VALUE``) gives this parameter;
@@ -558,7 +573,7 @@ def describe() -> list[Field]:
         m = f.metadata
         flag = m["flag"] or "--" + f.name.replace("_", "-")
         off = (m["off_flag"] or "--no-" + flag[2:]) if kind is bool else None
-        fixed = (m["help"], m["group"], m["paper"], m["unit"], m["self_match"])
+        fixed = (m["help"], m["group"], m["paper"], m["unit"], m["self_match"], m["match_only"])
         out.append(Field(f.name, flag, off, kind, choices, words, optional, f.default, *fixed))
     return out
 
@@ -570,7 +585,8 @@ def markdown_table() -> str:
         "",
         "Generated from `intrinsym.params.Params` by `python docs/generate_parameters.py`; do not edit by hand.",
         "Lengths are in units of sqrt(surface area). The Python name is the `Params` field;",
-        '`intrinsym detect` / `match` take the flag. "detect only" marks the self-matching options.',
+        '`intrinsym detect` / `match` take the flag. "detect only" and "match only" mark the options of one',
+        "mode.",
         "",
     ]
     for group in GROUPS:
@@ -586,7 +602,7 @@ def markdown_table() -> str:
             flag = f"`{f.flag}`" + (f" / `{f.off_flag}`" if f.off_flag else "")
             values = f.choices or f.words
             choices = f" {'One of' if f.choices else 'Or'} {', '.join(f'`{c}`' for c in values)}." if values else ""
-            where = " (detect only)" if f.self_match else ""
+            where = " (detect only)" if f.self_match else " (match only)" if f.match_only else ""
             text = f"{f.help}.{choices}{where}".replace("|", "\\|")
             paper = (f.paper or "").replace("|", "\\|")
             lines.append(f"| `{f.name}` | {flag} | `{f.default!r}` | {paper} | {f.unit or ''} | {text} |")

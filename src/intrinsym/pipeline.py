@@ -29,7 +29,7 @@ from .reflection import reflection
 from .result import Result
 from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
 from .support import SourceGraph, Support
-from .surface import ShapeLike, Surface, as_shape, prepare, sample
+from .surface import ShapeLike, Surface, as_shape, prepare, prepare_pair, sample
 
 log = logging.getLogger("intrinsym")
 
@@ -546,17 +546,17 @@ def match(
 ) -> Result:
     """Marginals of the two-shape MRF: source samples on A, target labels on B.
 
-    Both shapes are normalised to unit area separately, so near-isometric frames of one
-    object match whatever their units. Parameters as in :func:`detect`; the trivial
-    match does not apply.
+    Both shapes are measured in one unit, sqrt(area) of the larger
+    (``params.match_scale="larger"``), so that a part matched to a whole keeps its size;
+    ``"each"`` normalises each to unit area, for one object in different units.
+    Parameters as in :func:`detect`; the trivial match does not apply.
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
     check_machine(p)
     clock = _Clock(progress)
     sa, sb = as_shape(a), as_shape(b)
     clock.lap("load")
-    surf_a = prepare(sa, _min_vertices(p))
-    surf_b = prepare(sb, _min_vertices(p))
+    surf_a, surf_b = prepare_pair(sa, sb, _min_vertices(p), p.match_scale)
     clock.lap("prepare")
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")

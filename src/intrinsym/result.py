@@ -25,6 +25,7 @@ from .confidence import calibrated, carried_confidence, disagreement, map_mass, 
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, npz_headers, save_npz, write_set
+from .modes import two_modes
 from .params import Params
 from .runinfo import RunInfo, Sizes, stored_params
 from .support import Support
@@ -102,6 +103,8 @@ class Result:
         "symmetry_map.npy",
         "symmetry_mass.npy",
         "symmetry_confidence.npy",
+        "modes.json",
+        "mode_maps.npy",
     )
     #: What ``intrinsym evaluate``, ``view`` and ``render`` derive from a result set in its
     #: folder: a new set removes them (:meth:`save`).
@@ -247,7 +250,8 @@ class Result:
 
     def save(self, out_dir: str | os.PathLike, derived: Mapping[str, Writer] | None = None) -> Path:
         """Write ``out_dir/result.npz`` and ``out_dir/run.json``, and with an extraction
-        ``symmetries.json`` and ``symmetry_map.npy``, as one set
+        ``symmetries.json`` and ``symmetry_map.npy`` (a match's also ``modes.json`` and
+        ``mode_maps.npy``, :func:`intrinsym.modes.two_modes`), as one set
         (:func:`intrinsym.files.write_set`: the previous set stays whole until the new
         one replaces it; another process writing ``out_dir`` at the same time is refused
         with :class:`~intrinsym.errors.OutputError`).
@@ -288,6 +292,10 @@ class Result:
             conf = self.symmetry_confidence(mass)
             writers["symmetry_mass.npy"] = lambda path: np.save(path, mass)
             writers["symmetry_confidence.npy"] = lambda path: np.save(path, conf)
+            if self.info.mode == "match":
+                two = two_modes(self)
+                writers["modes.json"] = write_json(two.as_dict(), indent=2)
+                writers["mode_maps.npy"] = lambda path: np.save(path, two.maps)
         write_set(out, {**writers, **(derived or {})}, owned=(*self.FILES, *self.DERIVED))
         return out
 

@@ -2,11 +2,13 @@
 
 :func:`prepare` turns any :class:`~intrinsym.shape.Shape` into a :class:`Surface`
 (centred, unit sqrt(area), midpoint-subdivided when too coarse, with its geodesic graph
-and normals); :func:`sample` picks Poisson-disc samples of it.
+and normals); :func:`prepare_pair` prepares two for matching in a common unit;
+:func:`sample` picks Poisson-disc samples of it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 from functools import cached_property
@@ -17,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from . import geodesics, io, sampling
 from .errors import InputError, ParameterError
+from .params import MatchScale
 from .shape import Shape, clean, from_arrays, surface_area, vertex_normals
 
 #: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, an (N, 3)
@@ -98,6 +101,33 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
         graph=geodesics.surface_graph(vertices, faces),
         normals=vertex_normals(work),
     )
+
+
+def rescaled(surface: Surface, factor: float) -> Surface:
+    """``surface`` with its working lengths multiplied by ``factor`` (its unit divided by it)."""
+    work = Shape(surface.shape.vertices * factor, surface.shape.faces, surface.shape.path)
+    return dataclasses.replace(surface, shape=work, scale=surface.scale / factor, graph=surface.graph * factor)
+
+
+def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tuple[Surface, Surface]:
+    """:func:`prepare` two shapes for matching, in one common unit or each in its own.
+
+    Parameters
+    ----------
+    a, b : Shape
+    min_vertices : int
+        As in :func:`prepare`.
+    scale : {"larger", "each"}
+        "larger": both in units of sqrt(area) of the larger one, so that a part keeps
+        its size relative to the whole (each prepared alone would be blown up to unit
+        area, and every geodesic distance the pairwise term compares with the other
+        shape's would be off by sqrt(area ratio)); "each": each to unit area.
+    """
+    first, second = prepare(a, min_vertices), prepare(b, min_vertices)
+    if scale == "each":
+        return first, second
+    unit = max(first.scale, second.scale)
+    return rescaled(first, first.scale / unit), rescaled(second, second.scale / unit)
 
 
 def as_shape(obj: ShapeLike) -> Shape:
