@@ -115,6 +115,7 @@ def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path,
         )
     # the generated shapes carry their symmetry maps: scored as `intrinsym evaluate` scores them
     star_scores = json.loads((out / "star" / "scores.json").read_text())
+    assert star_scores["group"]["maps"] == 19  # all of star.maps.npy: scored against the nearest true map
     assert star_scores["mirror_hit"] == rows.loc["star", "mirror_hit"]
     assert star_scores["map"]["area_within_0.10"] == rows.loc["star", "map_area_within_0.10"]
     # the star's true map is a symmetry of the mesh itself: it keeps every distance

@@ -130,3 +130,89 @@ def test_readme_quick_start_runs(
     assert r.marginals.shape == (namespace["S"], namespace["T"])
     assert r.global_symmetry is not None, "spot has a global (left/right) symmetry"
     assert (namespace["vmap"] >= 0).mean() > 0.9
+
+
+def shell_commands(path: Path) -> list[str]:
+    """The ``intrinsym`` command lines of a markdown file's fenced shell blocks, comments
+    and a ``.venv/bin/`` prefix dropped."""
+    text = path.read_text(encoding="utf-8")
+    found = []
+    for lang, block in re.findall(r"^```(\w*)[ \t]*\n(.*?)^```[ \t]*$", text, flags=re.MULTILINE | re.DOTALL):
+        if lang not in ("", "sh", "bash", "console", "shell"):
+            continue
+        for line in block.splitlines():
+            for part in line.split("&&"):
+                part = re.sub(r"\s+#.*$", "", part).strip()
+                if re.match(r"(\.venv/bin/)?intrinsym ", part) and "`" not in part:
+                    found.append(part.removeprefix(".venv/bin/"))
+    return found
+
+
+#: What the placeholders of the documented commands stand for, in a test folder.
+PLACEHOLDERS = {
+    "MESH": "{d}/star.off",
+    "MESHES/": "{d}/meshes/",
+    "A": "{d}/star.off",
+    "B": "{d}/star.off",
+    "OUT": "{d}/out",
+    "V": "0",
+    "N": "30",
+    "M": "300",
+    "S": "0",
+    "FILE": "{d}/star.maps.npy",
+    "FILE.ply": "{d}/star.ply",
+    "NAME": "star",
+    "FILE.off": "{d}/gen.off",
+}
+
+
+def as_argv(command: str, folder: Path) -> list[str]:
+    """A documented command as an argument list: optional ``[...]`` parts kept, a
+    repetition ``[X ...]`` dropped, placeholders and ``DATA/`` bound to ``folder``."""
+    import shlex
+
+    command = re.sub(r"\[[^\]]*\.\.\.\]", "", command)
+    command = re.sub(r"\[([^\]]*)\]", r"\1", command)
+    words = shlex.split(command)[1:]
+    return [PLACEHOLDERS.get(w, w).format(d=folder).replace("DATA/", f"{folder}/") for w in words]
+
+
+DOCUMENTED = [(path.name, c) for path in [README, *DOCS] for c in shell_commands(path)]
+
+
+def test_the_documents_list_commands() -> None:
+    names = {name for name, _ in DOCUMENTED}
+    assert {"README.md", "scaling.md", "benchmarks.md"} <= names
+    commands = {c.split()[1] for _, c in DOCUMENTED}
+    assert {"detect", "match", "query", "render", "export", "evaluate", "batch", "bench"} <= commands
+
+
+@pytest.mark.parametrize(("doc", "command"), DOCUMENTED, ids=[f"{d}: {c}" for d, c in DOCUMENTED])
+def test_every_documented_command_parses(doc: str, command: str, tmp_path: Path) -> None:
+    """Every option of every command the README and docs show exists, as written."""
+    from intrinsym import cli
+
+    argv = as_argv(command, tmp_path)
+    try:
+        cli.build_parser(full=True).parse_args(argv)
+    except SystemExit as stop:
+        pytest.fail(f"{doc}: `{command}` does not parse (exit {stop.code})")
+
+
+def test_readme_commands_run(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The README's command-line block runs as written (placeholders bound to a generated
+    star); match and batch, which need a second shape or a Dask cluster, are run by
+    tests/test_cli.py and tests/test_batch.py."""
+    from intrinsym import cli
+
+    assert cli.main(["generate", "star", "--resolution", "4", "-o", str(tmp_path / "star.off")]) == 0
+    ran = []
+    for command in shell_commands(README):
+        argv = as_argv(command, tmp_path)
+        if argv[0] in ("match", "batch") or (argv[0] == "detect" and "--example" in argv):
+            continue
+        assert cli.main(argv) == 0, f"README.md: `{command}` failed: {capsys.readouterr().err}"
+        ran.append(argv[0])
+    assert ran == ["detect", "query", "render", "export", "evaluate", "bench"]
+    assert (tmp_path / "out" / "figures" / "global_symmetry.png").is_file() and (tmp_path / "star.ply").is_file()
+    assert json.loads((tmp_path / "out" / "scores.json").read_text())["group"]["maps"] == 19

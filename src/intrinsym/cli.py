@@ -10,9 +10,8 @@ import json
 import re
 import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from rich.console import Console
@@ -22,6 +21,7 @@ from rich.table import Table
 from . import (
     __version__,
     bench,
+    cli_extra,
     evaluate,
     example_path,
     extract,
@@ -30,73 +30,17 @@ from . import (
     pipeline,
     resources,
     shapes,
+    symmetry_group,
+    text_tables,
     viewer,
     viz,
 )
 from .batching import command as batch_command
 from .errors import InputError, IntrinsymError, ParameterError
 from .io import load
-from .progress import BPIteration, ProgressEvent
+from .progress import BPIteration, ProgressEvent, next_stage
 from .records import records
 from .result import Result, saved_global_confidence
-
-
-def _number_or(words: tuple[str, ...], kind: type) -> Callable[[str], Any]:
-    """An argparse type taking a number of ``kind`` or one of ``words``."""
-
-    def parse(text: str) -> Any:
-        if text in words:
-            return text
-        try:
-            return kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected {' or '.join(map(repr, words))} or a number, got {text!r}"
-            ) from None
-
-    return parse
-
-
-def _help(f: params.Field) -> str:
-    notes = [f"default {'none' if f.default is None else f.default}"]
-    if f.paper:
-        notes.append(f"paper: {f.paper}")
-    if f.unit:
-        notes.append(f"unit: {f.unit}")
-    return f"{f.help} ({'; '.join(notes)})"
-
-
-def _add_model_options(p: argparse.ArgumentParser, self_match: bool) -> None:
-    p.add_argument("-o", "--out", required=True, help="output directory (result.npz, run.json)")
-    p.add_argument(
-        "--preset",
-        choices=sorted(params.PRESETS),
-        default="default",
-        help="parameter preset; 'paper' sets rho 0.4, gamma 0.01, serial schedule, 100 iterations "
-        "and keeps the trivial match (default: default)",
-    )
-    groups = {name: p.add_argument_group(f"{name} options") for name in params.GROUPS}
-    for f in params.describe():
-        if f.self_match and not self_match or f.match_only and self_match:
-            continue
-        group = groups[f.group]
-        if f.kind is bool:
-            both = group.add_mutually_exclusive_group()
-            both.add_argument(f.flag, dest=f.name, action="store_true", default=None, help=_help(f))
-            assert f.off_flag is not None
-            both.add_argument(f.off_flag, dest=f.name, action="store_false", help=f"the opposite of {f.flag}")
-        else:
-            kind = _number_or(f.words, f.kind) if f.words else f.kind
-            group.add_argument(f.flag, dest=f.name, type=kind, choices=f.choices, default=None, help=_help(f))
-    p.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
-    p.add_argument("--json", action="store_true", help="print the run summary as JSON")
-    p.add_argument("--figures", action="store_true", help="also write the PNGs of 'intrinsym render' to OUT/figures")
-    p.add_argument(
-        "--up",
-        choices=sorted(viz.UP_FRAMES),
-        default="y",
-        help="figures: world axis drawn upwards (default y; TOSCA and KIDS are z-up)",
-    )
 
 
 def _add_output_commands(sub: argparse._SubParsersAction) -> None:
@@ -135,8 +79,9 @@ def _add_output_commands(sub: argparse._SubParsersAction) -> None:
         q.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def build_parser(full: bool = False) -> argparse.ArgumentParser:
+    """The ``intrinsym`` parser; ``full``: every model parameter in the help (``--help-all``)."""
+    parser = cli_extra.Parser(
         prog="intrinsym",
         description="Partial intrinsic symmetries of 3D shapes: marginals of a correspondence MRF by loopy BP.",
     )
@@ -150,7 +95,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     d.add_argument("mesh", nargs="?", help="mesh (.off .obj .ply .stl) or point cloud (.ply .xyz .npy)")
     d.add_argument("--example", action="store_true", help="use the shipped example mesh (spot, public domain)")
-    _add_model_options(d, self_match=True)
+    cli_extra.add_model_options(d, True, full, "output directory (result.npz, run.json, symmetry_map.npy, ...)")
 
     m = sub.add_parser(
         "match",
@@ -159,9 +104,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     m.add_argument("a", help="source shape")
     m.add_argument("b", help="target shape")
-    _add_model_options(m, self_match=False)
+    cli_extra.add_model_options(m, False, full, "output directory (result.npz, run.json)")
 
     _add_output_commands(sub)
+    cli_extra.add_export_commands(sub)
 
     bt = sub.add_parser(
         "batch",
@@ -170,20 +116,27 @@ def build_parser() -> argparse.ArgumentParser:
         "a running scheduler: one folder per item in OUT, OUT/summary.parquet and summary.csv; a re-run skips "
         "the items already done. Exit code 1 when an item failed.",
     )
-    _add_model_options(bt, self_match=True)
+    cli_extra.add_model_options(
+        bt, True, full, "output directory: one result folder per item, summary.parquet and summary.csv"
+    )
     batch_command.add_arguments(bt)
 
     e = sub.add_parser(
         "evaluate",
-        help="score a saved result against a symmetry map",
-        description="Marginal scores (mirror hit, peak recall, decoy recall, breadth) of OUT.",
+        help="score a saved result against its ground truth (one or several true maps)",
+        description="Scores of OUT against the ground truth (distances in sqrt(area) units): the marginals' (mirror "
+        "hit, peak recall, decoy recall, breadth), the global map's (share within 0.05 / 0.10, mean error, "
+        "distortion, the confidence's calibration) and, with several true maps, each found symmetry against its "
+        "nearest one; written to OUT/scores.json and OUT/curve.png.",
     )
     e.add_argument("out", help="directory written by detect")
     e.add_argument(
         "--symmetry-map",
         required=True,
-        help="ground truth: TOSCA .sym, KIDS sym.txt or 0-based .npy (-1: no image, as in a partial "
-        "symmetry; such vertices are not scored)",
+        action="append",
+        help="ground truth: TOSCA .sym, KIDS sym.txt or 0-based .npy (-1: no image, as in a partial symmetry; "
+        "such vertices are not scored; shape (K, V): K true maps, a symmetry group); repeat for several true "
+        "maps: each found symmetry is scored against its nearest one (docs/format.md)",
     )
     e.add_argument("--mesh", help="the mesh the result was computed on (default: the input named in run.json)")
     e.add_argument("--seed", type=int, default=0, help="seed of the decoy choice (default 0)")
@@ -295,7 +248,8 @@ def _print_summary(s: dict) -> None:
         )
     if s.get("global_confidence") is not None:
         print(
-            f"global symmetry: {s['global_confidence']:.2f} of the vertices expected within 0.05 of their true image "
+            f"global symmetry: {s['global_confidence']:.2f} of the vertices expected within 0.05 sqrt(area) of their "
+            "true image "
             "(symmetry_confidence.npy)"
         )
     print(f"wrote {', '.join(s['files'])} to {s['out']}")
@@ -325,7 +279,7 @@ class _Progress:
             )
         else:
             self.bar.console.print(f"[green]done[/] {event.stage}: {event.seconds:.2f} s", highlight=False)
-            self.bar.update(self.task, description="running the next stage")
+            self.bar.update(self.task, description=next_stage(event.stage))
 
     def __enter__(self) -> _Progress:
         self.bar.start()
@@ -412,13 +366,16 @@ def _bench(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([dataclasses.asdict(r) for r in results], indent=2))
         return 0
-    table = Table(title="intrinsym bench (seconds; paper: 100 iterations, GTX280 / 2.66 GHz CPU)")
-    rows = bench.table(results)
-    for col in rows[0]:
-        table.add_column(col, justify="right")
-    for row in rows[1:]:
-        table.add_row(*row)
-    Console().print(table)
+    console = Console()
+    title = "intrinsym bench (seconds; paper: 100 iterations, GTX280 / 2.66 GHz CPU)"
+    for part in text_tables.fit_columns(bench.table(results), console.width):
+        table = Table(title=title)
+        for col in part[0]:
+            table.add_column(col, justify="right")
+        for row in part[1:]:
+            table.add_row(*row)
+        console.print(table)
+        title = ""
     return 0
 
 
@@ -432,6 +389,8 @@ def _run(args: argparse.Namespace) -> int:
         return _generate(args)
     if args.command in ("render", "view"):
         return _render_or_view(args)
+    if args.command in ("export", "show"):
+        return cli_extra.run_export(args)
     if args.command in ("detect", "match"):
         p = _params(args)
         if args.command == "detect" and args.example == (args.mesh is not None):
@@ -466,17 +425,20 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "query":
         return _query(args, result, out)
     shape = load(args.mesh or result.info.input)
-    sym = evaluate.load_symmetry_map(args.symmetry_map, len(shape.vertices), allow_missing=True)
     has_map = (out / "symmetry_map.npy").is_file()
     if args.labels and not has_map:
         raise InputError(f"{out}: no symmetry_map.npy to segment (rerun intrinsym detect)")
     n = len(shape.vertices)
+    found = evaluate.load_symmetry_map(out / "symmetry_map.npy", n, allow_missing=True) if has_map else None
+    truths = symmetry_group.load_truths(args.symmetry_map, shape)
+    nearest, group = symmetry_group.group_report(truths, found, viz.load_symmetries(out), shape)
+    sym = truths[nearest].partner
     conf_path = out / "symmetry_confidence.npy"
     report, maps = evaluate.evaluation_report(
         result.marginals,
         result.source_point_vertex,
         result.target_point_vertex,
-        evaluate.load_symmetry_map(out / "symmetry_map.npy", n, allow_missing=True) if has_map else None,
+        found,
         shape,
         sym,
         labels=evaluate.load_labels(args.labels, n) if args.labels else None,
@@ -485,6 +447,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     if maps is not None:
         evaluate.plot_curve(maps, out / "curve.png")
+    report["group"] = group
     evaluate.save_scores(report, out / "scores.json")
     if args.json:
         print(json.dumps(report, indent=2))
@@ -492,14 +455,14 @@ def _run(args: argparse.Namespace) -> int:
         print(
             f"mirror hit {report['mirror_hit']:.3f}  peak recall {report['peak_recall']:.3f}  "
             f"decoy recall {report['decoy_recall']:.3f}  breadth {report['breadth']:.4f}  "
-            f"({report['n_scored']} source points scored)"
+            f"(fractions; {report['n_scored']} source points scored)"
         )
         if "map" in report:
             m = report["map"]
             print(
-                f"global map: within 0.05 {m['within_0.05']:.3f}  within 0.10 {m['within_0.10']:.3f}  "
-                f"(of the area {m['area_within_0.05']:.3f} / {m['area_within_0.10']:.3f})  "
-                f"mean error {m['mean_error']:.4f}  coverage {m['coverage']:.3f}  (curve.png)"
+                f"global map (shares of the vertices): within 0.05 sqrt(area) {m['within_0.05']:.3f}  within 0.10 "
+                f"{m['within_0.10']:.3f}  (of the area {m['area_within_0.05']:.3f} / {m['area_within_0.10']:.3f})  "
+                f"mean error {m['mean_error']:.4f} sqrt(area)  coverage {m['coverage']:.3f}  (curve.png)"
             )
             for label, value in m["segmentation"].items():
                 print(f"segmentation part {label}: {100 * value:.1f}%")
@@ -508,13 +471,15 @@ def _run(args: argparse.Namespace) -> int:
                 print(
                     f"confidence (symmetry_confidence.npy): expected calibration error "
                     f"{c['expected_calibration_error']:.3f}, mean {c['confidence']:.3f} against "
-                    f"{c['within']:.3f} measured within {c['threshold']}"
+                    f"{c['within']:.3f} measured within {c['threshold']} sqrt(area)"
                 )
-        truth = report["truth_distortion"]
-        line = f"distortion (pairs within {truth['radius']} changed by more than 0.05): "
+        for line in symmetry_group.group_lines(group):
+            print(line)
+        distortion = report["truth_distortion"]
+        line = f"distortion (share of the pairs within {distortion['radius']} sqrt(area) changed by more than 0.05): "
         if "map" in report:
             line += f"global map {report['map']['distortion']['above_0.05']:.3f}, "
-        print(line + f"ground truth {truth['above_0.05']:.3f}")
+        print(line + f"ground truth {distortion['above_0.05']:.3f}")
     return 0
 
 
@@ -571,7 +536,7 @@ def _terminate(signum: int, frame: object) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``intrinsym`` command; returns the exit code (2 for a user
     error, 130 on Ctrl-C, 143 on SIGTERM)."""
-    args = build_parser().parse_args(argv)
+    args = cli_extra.parse(build_parser, argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         return _run(args)

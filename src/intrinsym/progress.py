@@ -16,8 +16,7 @@ class StageDone:
     Attributes
     ----------
     stage : str
-        "load", "prepare", "sampling", "geodesics", "descriptors", "unary", "bp",
-        "extract" or "zoomout".
+        One of :data:`STAGES`.
     seconds : float
         Its wall time (summed when the stage ran more than once).
     """
@@ -43,6 +42,16 @@ class BPIteration:
     iteration: int
     max_change: float
     max_iterations: int
+
+
+#: The stages of a run in the order they finish (``bp`` once per pass).
+STAGES = ("load", "prepare", "sampling", "geodesics", "descriptors", "unary", "bp", "extract", "global_map")
+
+
+def next_stage(done: str) -> str:
+    """The stage that runs after ``done`` (:data:`STAGES`); "finishing" after the last."""
+    order = list(STAGES)
+    return order[order.index(done) + 1] if done in order[:-1] else "finishing"
 
 
 ProgressEvent = StageDone | BPIteration

@@ -244,6 +244,37 @@ class Result:
             return None
         return float(np.mean(self.symmetry_confidence()))
 
+    def to_trimesh(self, color: str = "side", mesh: str | os.PathLike | None = None) -> Any:
+        """The input as a ``trimesh.Trimesh`` (``PointCloud`` for a cloud), its vertices in
+        the input's order, coloured by the global symmetry (:func:`intrinsym.export.to_trimesh`;
+        ``color``: ``side``, ``partner`` or ``confidence``, :mod:`intrinsym.coloring`).
+        ``mesh``: the input's path when it moved (default: the one in ``run.json``)."""
+        from .export import to_trimesh
+        from .io import load
+
+        shape = load(mesh if mesh is not None else self.info.input)
+        conf = self.symmetry_confidence() if color == "confidence" else None
+        return to_trimesh(shape, self.symmetry_map(), conf, color)
+
+    def summary_line(self) -> str:
+        """One line, cheap to make (no array is computed): mode, input, sizes, BP and the
+        number of symmetries (the ``repr``)."""
+        z, bp = self.info.sizes, self.info.bp
+        found = "" if self.extraction is None else f", {len(self.extraction.symmetries)} symmetries"
+        state = "converged" if bp.converged else "not converged"
+        return (
+            f"{self.info.mode} of {Path(self.info.input).name}: |Ps| = {z.source}, |Pt| = {z.target}, "
+            f"BP {bp.iterations} iterations ({state}){found}"
+        )
+
+    def __repr__(self) -> str:
+        return f"<intrinsym.Result {self.summary_line()}>"
+
+    def _repr_html_(self) -> str:
+        import html
+
+        return f"<b>intrinsym.Result</b> {html.escape(self.summary_line())}"
+
     def run_json(self) -> dict[str, Any]:
         """``run.json``'s content: the parameters and :class:`RunInfo`."""
         return {"params": dataclasses.asdict(self.params), **self.info.to_dict()}

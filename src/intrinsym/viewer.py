@@ -31,9 +31,9 @@ from typing import IO, Any
 
 import numpy as np
 
-from . import viz
+from . import coloring, viz
 from .errors import InputError
-from .evaluate import load_confidence
+from .evaluate import load_confidence, load_symmetry_map
 from .files import atomic_write
 from .records import part_vertices
 from .result import Result
@@ -44,6 +44,9 @@ MAX_SYMMETRIES = 20
 
 MAX_MARKS = 12
 """Sample pairs marked on the symmetry shown alone (same-coloured discs on a pair's two ends)."""
+
+ALIKE = 0.9
+"""Two symmetries of one kind whose parts overlap this much (IoU) are listed as one."""
 
 MAIN_PARAMETERS = ("n_source", "n_target", "unary", "schedule", "trivial_weight", "peak_threshold", "d_error")
 """The parameters the run panel shows unfolded; the others are folded."""
@@ -228,9 +231,56 @@ def run_panel(result: Result, n_vertices: int) -> dict[str, dict[str, Any]]:
     }
 
 
+def _overlaps(a: np.ndarray, b: np.ndarray, share: float) -> bool:
+    """Whether two non-empty vertex masks share at least ``share`` of their union."""
+    union = int(np.count_nonzero(a | b))
+    return union > 0 and int(np.count_nonzero(a & b)) >= share * union
+
+
+def merge_alike(records: Sequence[Mapping[str, Any]], n_vertices: int, overlap: float = ALIKE) -> list[list[int]]:
+    """Groups of symmetries the same within a tolerance, for display: each group holds a
+    symmetry (the best ranked first) and those of the same kind below it whose source
+    part and image part each overlap its own by at least ``overlap`` (intersection over
+    union of the input vertices).
+
+    Parameters
+    ----------
+    records : sequence of dict
+        ``symmetries.json`` entries, in rank order.
+    n_vertices : int
+    overlap : float
+
+    Returns
+    -------
+    list of list of int
+        Indices into ``records``, in rank order of each group's first.
+    """
+    masks = part_masks(records, n_vertices)
+    groups: list[list[int]] = []
+    for i, rec in enumerate(records):
+        for group in groups:
+            j = group[0]
+            if records[j].get("kind") != rec.get("kind"):
+                continue
+            if all(_overlaps((masks[j] & bit) > 0, (masks[i] & bit) > 0, overlap) for bit in (1, 2)):
+                group.append(i)
+                break
+        else:
+            groups.append([i])
+    return groups
+
+
 def _symmetry_data(symmetries: Sequence[Mapping[str, Any]], vertices: np.ndarray) -> dict[str, Any]:
-    """The page's symmetry list (self-matching), part masks and the one shown first."""
-    indices, best = shown_symmetries(symmetries)
+    """The page's symmetry list (self-matching; those alike merged, :func:`merge_alike`),
+    part masks and the one shown first."""
+    groups = merge_alike(symmetries, len(vertices))
+    # the best stays listed: a group holding it is shown by it
+    best_index = best_symmetry(symmetries)
+    kept = [best_index if best_index in group else group[0] for group in groups]
+    alike = {k: len(group) - 1 for k, group in zip(kept, groups)}
+    merged = [symmetries[i] for i in kept]
+    positions, best = shown_symmetries(merged)
+    indices = [kept[p] for p in positions]
     shown = [symmetries[i] for i in indices]
     return {
         "parts": pack(part_masks(shown, len(vertices))),
@@ -241,6 +291,7 @@ def _symmetry_data(symmetries: Sequence[Mapping[str, Any]], vertices: np.ndarray
                 "score": float(s.get("score", 0.0)),
                 "n_pairs": len(s.get("pairs", [])),
                 "marks": pair_marks(s, vertices),
+                "alike": alike[i],
             }
             for i, s in zip(indices, shown)
         ],
@@ -270,6 +321,7 @@ def payload(
     up: str = "y",
     k: int = 12,
     confidence: np.ndarray | None = None,
+    symmetry_map: np.ndarray | None = None,
 ) -> dict:
     """Everything the page needs, JSON-ready.
 
@@ -289,6 +341,9 @@ def payload(
         Target samples per vertex in the Eq. 9 interpolation.
     confidence : (N,) float array or None
         ``symmetry_confidence.npy``: the page can colour the symmetry view by it.
+    symmetry_map : (N,) int array or None
+        ``symmetry_map.npy``: the page opens on it, each side in its colour or each point
+        coloured like its partner (:func:`map_data`).
 
     Returns
     -------
@@ -321,12 +376,37 @@ def payload(
         "run": run_panel(result, len(shape.vertices)),
         "scores": scores,
     }
+    if self_match and symmetry_map is not None and (symmetry_map >= 0).any():
+        data.update(map_data(shape, symmetry_map))
     if self_match and confidence is not None and len(confidence) == len(shape.vertices) and confidence.any():
         data["confidence"] = pack(np.asarray(confidence, dtype=np.float32))
         data["global_confidence"] = float(np.mean(confidence))
     if not self_match:
         data["symmetries_note"] = "not shown for two-shape matching"
     return data
+
+
+def map_data(shape: Shape, symmetry_map: np.ndarray) -> dict[str, Any]:
+    """The global symmetry map's colours (:func:`intrinsym.coloring.vertex_colors`: ``side``
+    and ``partner``, uint8 RGB per vertex), the legend of each colouring, its counts and
+    ``map_axis``, the mean direction from a point of one side to its image (the camera
+    opens across it, both sides in view)."""
+    side = coloring.sides(shape, symmetry_map)
+    one = np.flatnonzero(side == 0)
+    across = np.mean(shape.vertices[one] - shape.vertices[symmetry_map[one]], axis=0) if len(one) else np.zeros(3)
+    colors = {mode: coloring.vertex_colors(shape, symmetry_map, mode) for mode in ("side", "partner")}
+    return {
+        "map_colors": {mode: pack(np.round(255 * rgb).astype(np.uint8)) for mode, rgb in colors.items()},
+        "legends": {
+            mode: [[label, coloring.hex_color(rgb)] for label, rgb in coloring.legend(mode)] for mode in coloring.MODES
+        },
+        "map_axis": (across / max(float(np.linalg.norm(across)), 1e-300)).tolist(),
+        "map_counts": {
+            "vertices": len(side),
+            "no partner": int(np.count_nonzero(side == -1)),
+            "fixed": int(np.count_nonzero(side == 2)),
+        },
+    }
 
 
 #: How the page gets a number JSON cannot hold (its JSON parser rejects ``NaN``).
@@ -377,8 +457,8 @@ def write(
     Parameters
     ----------
     out_dir : path
-        Directory written by ``Result.save`` (``symmetries.json``, ``scores.json`` and
-        ``symmetry_confidence.npy`` are used when present).
+        Directory written by ``Result.save`` (``symmetries.json``, ``scores.json``,
+        ``symmetry_map.npy`` and ``symmetry_confidence.npy`` are used when present).
     html_path : path, optional
         Default ``out_dir/viewer.html``.
     mesh_path : path, optional
@@ -399,7 +479,11 @@ def write(
         raise InputError(f"{scores_path}: cannot read it ({err}); run intrinsym evaluate again") from None
     conf_path = out / "symmetry_confidence.npy"
     conf = load_confidence(conf_path, len(shape.vertices)) if conf_path.is_file() else None
-    html = render_html(payload(result, shape, viz.load_symmetries(out), scores, up, confidence=conf))
+    map_path = out / "symmetry_map.npy"
+    found = load_symmetry_map(map_path, len(shape.vertices), allow_missing=True) if map_path.is_file() else None
+    html = render_html(
+        payload(result, shape, viz.load_symmetries(out), scores, up, confidence=conf, symmetry_map=found)
+    )
     path = Path(html_path) if html_path is not None else out / "viewer.html"
 
     def write_html(f: IO[str]) -> None:

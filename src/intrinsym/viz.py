@@ -26,7 +26,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import coloring
 from .errors import InputError, ParameterError
+from .evaluate import load_symmetry_map
 from .files import atomic_write
 from .io import load
 from .records import part_vertices
@@ -392,6 +394,38 @@ def symmetry_figure(
     return _save(fig, Path(path))
 
 
+def symmetry_map_figure(
+    shape: Shape, symmetry_map: np.ndarray, path: str | Path, params: FigureParams = FigureParams()
+) -> Path:
+    """PNG of the global symmetry map (``symmetry_map.npy``) at a glance, with a legend.
+
+    Two rows of views: the two sides in two colours (fixed points white, points without a
+    partner grey) and every point coloured like its partner
+    (:func:`intrinsym.coloring.vertex_colors`).
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
+    n = len(params.views)
+    fig = Figure(figsize=(params.size * n, 2 * params.size + 0.5), dpi=params.dpi)
+    axes = fig.subplots(2, n, squeeze=False)
+    fig.subplots_adjust(left=0.01, right=0.99, top=0.92, bottom=0.1, wspace=0.02, hspace=0.08)
+    titles = {"side": "its two sides", "partner": "each point coloured like its partner"}
+    for row, mode in enumerate(("side", "partner")):
+        rgb = coloring.vertex_colors(shape, symmetry_map, mode)
+        for ax, view in zip(axes[row], params.views):
+            ax.set_axis_off()
+            ax.set_aspect("equal")
+            _draw_mesh(ax, shape.vertices, shape.faces, rgb, view_rotation(*view, params.up))
+        axes[row][0].set_title(titles[mode], fontsize=9, loc="left")
+    entries = coloring.legend("side")
+    handles = [Patch(facecolor=rgb, edgecolor="0.4", label=label) for label, rgb in entries]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    none = int(np.count_nonzero(np.asarray(symmetry_map) < 0))
+    fig.suptitle(f"global symmetry map ({none} of {len(symmetry_map)} vertices without a partner)", fontsize=10)
+    return _save(fig, Path(path))
+
+
 def load_symmetries(out_dir: str | Path) -> list[dict]:
     """Entries of ``out_dir/symmetries.json``; an empty list when the file is absent."""
     path = Path(out_dir) / "symmetries.json"
@@ -447,7 +481,8 @@ def render(
     Returns
     -------
     list of Path
-        ``marginal.png``, ``graph.png`` and ``symmetry_<k>.png`` per extracted symmetry.
+        ``marginal.png``, ``graph.png``, ``global_symmetry.png`` (with ``symmetry_map.npy``:
+        :func:`symmetry_map_figure`) and ``symmetry_<k>.png`` per extracted symmetry.
     """
     result = Result.load(out_dir)
     target, source_shape = load_shapes(result, mesh_path)
@@ -463,6 +498,10 @@ def render(
     folder.mkdir(parents=True, exist_ok=True)
     paths = [marginal_figure(target, result, source, folder / "marginal.png", params, source_shape)]
     paths.append(graph_figure(source_shape or target, result, folder / "graph.png", params))
+    map_path = Path(out_dir) / "symmetry_map.npy"
+    if source_shape is None and map_path.is_file():
+        found = load_symmetry_map(map_path, len(target.vertices), allow_missing=True)
+        paths.append(symmetry_map_figure(target, found, folder / "global_symmetry.png", params))
     if source_shape is None:
         for k, record in enumerate(symmetries[:max_symmetries], start=1):
             paths.append(symmetry_figure(target, record, k, folder / f"symmetry_{k}.png", params))

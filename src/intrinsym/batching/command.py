@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import sys
 from typing import Any
 
@@ -14,6 +13,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
+from .. import text_tables
 from ..errors import ParameterError
 from ..params import make_params
 from . import batch, engine, report
@@ -115,22 +115,21 @@ class _Bar:
         self.bar.stop()
 
 
-def _number(value: Any) -> str:
-    if isinstance(value, float):
-        return "" if math.isnan(value) else f"{value:.3f}"
-    return str(value)
-
-
 def _print_report(out: str, show: bool) -> dict[str, Any]:
     table, plot = report(out)
     if show:
-        shown = Table(title=f"intrinsym batch report: {out} (plot: {plot})")
-        shown.add_column("class")
-        for column in table.columns:
-            shown.add_column(column, justify="right")
-        for name, row in table.iterrows():
-            shown.add_row(str(name), *(_number(v) for v in row))
-        Console(width=max(160, Console().width)).print(shown)
+        cells = [text_tables.format_column(list(table[column])) for column in table.columns]
+        rows = [["class", *table.columns], *([str(name), *row] for name, row in zip(table.index, zip(*cells)))]
+        console = Console()
+        title = f"intrinsym batch report: {out} (plot: {plot})"
+        for part in text_tables.fit_columns(rows, console.width):
+            shown = Table(title=title)
+            for column in part[0]:
+                shown.add_column(column, justify="left" if column == "class" else "right")
+            for row in part[1:]:
+                shown.add_row(*row)
+            console.print(shown)
+            title = ""
     return {"report": json.loads(table.to_json(orient="index")), "plot": str(plot)}
 
 

@@ -81,9 +81,10 @@ def _class_of(path: str) -> str:
 
 
 def _ground_truth(mesh: Path) -> str | None:
-    """A symmetry map beside the mesh: ``STEM.sym.npy`` (``intrinsym generate``), ``STEM.sym``
-    or the class's TOSCA map ``CLASS.sym``."""
+    """A symmetry map beside the mesh: ``STEM.maps.npy`` (all true maps, ``intrinsym generate``),
+    ``STEM.sym.npy``, ``STEM.sym`` or the class's TOSCA map ``CLASS.sym``."""
     for candidate in (
+        mesh.with_suffix(".maps.npy"),
         mesh.with_suffix(".sym.npy"),
         mesh.with_suffix(".sym"),
         mesh.parent / f"{_class_of(mesh.name)}.sym",

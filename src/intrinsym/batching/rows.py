@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import evaluate
+from .. import evaluate, symmetry_group
 from ..errors import IntrinsymError
 from ..io import load
 from ..result import Result, saved_global_confidence
@@ -175,7 +175,8 @@ def finished_row(item: Item, key: str, folder: Path, status: str = "skipped") ->
 
 
 def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> dict[str, Any]:
-    """``intrinsym evaluate``'s report of a result (:func:`intrinsym.evaluate.evaluation_report`).
+    """``intrinsym evaluate``'s report of a result (:func:`intrinsym.evaluate.evaluation_report`),
+    against the nearest of the true maps ``symmetry_map`` holds (:mod:`intrinsym.symmetry_group`).
 
     Parameters
     ----------
@@ -187,14 +188,17 @@ def score(result: Result, mesh: str, symmetry_map: str, labels: str | None) -> d
     shape = load(mesh)
     n = len(shape.vertices)
     has_map = result.extraction is not None and result.support is not None
+    found = result.symmetry_map() if has_map else None
+    truths = symmetry_group.load_truths([symmetry_map], shape)
+    nearest, group = symmetry_group.group_report(truths, found, (), shape)
     report, _ = evaluate.evaluation_report(
         result.marginals,
         result.source_point_vertex,
         result.target_point_vertex,
-        result.symmetry_map() if has_map else None,
+        found,
         shape,
-        evaluate.load_symmetry_map(symmetry_map, n, allow_missing=True),
+        truths[nearest].partner,
         labels=evaluate.load_labels(labels, n) if labels and has_map else None,
         confidence=result.symmetry_confidence() if has_map else None,
     )
-    return report
+    return {**report, "group": group}
