@@ -11,8 +11,9 @@ Three ways to colour a map ``m`` (the image vertex of every vertex, -1 for none)
   among the quarter of vertices farthest from their images, the one whose split ``m``
   swaps most often, so a swap of the two halves shows as two colours;
 * ``partner``: every point coloured like its partner: the mean of a smooth colouring
-  of the shape (its normalised coordinates as RGB) at the point and at its image, so
-  symmetric points share a colour and the pairing shows as matching colours;
+  of the shape (its normalised coordinates as RGB) at the point and at its image, each
+  channel stretched to the full range, so symmetric points share a colour and the
+  pairing shows as matching colours;
 * ``confidence``: the map's per-vertex confidence on a heat scale (blue 0, red 1).
 """
 
@@ -104,6 +105,19 @@ def heat(values: np.ndarray) -> np.ndarray:
     return (1 - t) * stops[low] + t * stops[low + 1]
 
 
+def _stretch(rgb: np.ndarray, least: float = 0.2) -> np.ndarray:
+    """Each channel that spans at least ``least`` stretched to [0.15, 0.95]: the mean of a
+    point's colour and its partner's varies little across the symmetry, so contrast is
+    restored along it (the same map for every point keeps partners alike)."""
+    out = np.array(rgb, dtype=np.float64)
+    if not len(out):
+        return out
+    low, span = out.min(axis=0), np.ptp(out, axis=0)
+    wide = span >= least
+    out[:, wide] = 0.15 + 0.8 * (out[:, wide] - low[wide]) / span[wide]
+    return out
+
+
 def vertex_colors(
     shape: Shape, symmetry_map: np.ndarray, mode: str = "side", confidence: np.ndarray | None = None
 ) -> np.ndarray:
@@ -129,6 +143,7 @@ def vertex_colors(
     if mode == "partner":
         base = smooth_colors(shape.vertices)
         rgb = 0.5 * (base + base[np.where(none, np.arange(len(m)), m)])
+        rgb[~none] = _stretch(rgb[~none])
     else:
         if confidence is None:
             raise ValueError("the confidence colours need the confidence (symmetry_confidence.npy)")
