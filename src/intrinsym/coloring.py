@@ -54,13 +54,13 @@ def legend(mode: str) -> list[tuple[str, tuple[float, float, float]]]:
     return [("confidence 0", HEAT[0]), ("0.5", HEAT[2]), ("1", HEAT[-1]), ("no partner", NONE_COLOR)]
 
 
-def _distances(shape: Shape, sources: np.ndarray) -> np.ndarray:
-    """(len(sources), N) distances in sqrt(area) units: geodesic on a mesh, straight on a cloud."""
+def _distances(shape: Shape, sources: np.ndarray, unit: tuple | None) -> np.ndarray:
+    """(len(sources), N) distances: geodesic on a mesh (``unit``: its
+    :func:`intrinsym.geodesics.unit_area_graph`), straight on a cloud (``unit`` None)."""
     v = np.asarray(shape.vertices, dtype=np.float64)
-    if shape.faces is None or len(shape.faces) == 0:
-        scale = np.sqrt(len(v)) / max(float(np.ptp(v, axis=0).max()), 1e-12)
-        return np.linalg.norm(v[None, :, :] - v[sources][:, None, :], axis=2) * scale
-    _, vmap, graph = geodesics.unit_area_graph(shape)
+    if unit is None:
+        return np.linalg.norm(v[None, :, :] - v[sources][:, None, :], axis=2)
+    _, vmap, graph = unit
     return geodesics.distances_from(graph, vmap[sources])[:, vmap]
 
 
@@ -78,8 +78,10 @@ def sides(shape: Shape, symmetry_map: np.ndarray) -> np.ndarray:
     far = has[gap >= np.quantile(gap, 0.75)]
     seeds = np.random.default_rng(0).choice(far, size=min(SEEDS, len(far)), replace=False)
     best, agree = np.zeros(len(has), dtype=np.int8), -1.0
+    mesh = shape.faces is not None and len(shape.faces) > 0
+    unit = geodesics.unit_area_graph(shape) if mesh else None
     for a in seeds:
-        d = _distances(shape, np.array([a, m[a]]))
+        d = _distances(shape, np.array([a, m[a]]), unit)
         split = np.where(d[0] <= d[1], 0, 1).astype(np.int8)
         swapped = float(np.mean(split[has] != split[m[has]]))
         if swapped > agree:
@@ -87,6 +89,11 @@ def sides(shape: Shape, symmetry_map: np.ndarray) -> np.ndarray:
     out[has] = best
     out[has[gap <= FIXED]] = 2
     return out
+
+
+def side_colors(side: np.ndarray) -> np.ndarray:
+    """(N, 3) RGB of :func:`sides`' labels."""
+    return np.array([*SIDE_COLORS, FIXED_COLOR, NONE_COLOR])[np.asarray(side)]
 
 
 def smooth_colors(vertices: np.ndarray) -> np.ndarray:
@@ -138,8 +145,7 @@ def vertex_colors(
     m = np.asarray(symmetry_map, dtype=np.int64)
     none = m < 0
     if mode == "side":
-        palette = np.array([*SIDE_COLORS, FIXED_COLOR, NONE_COLOR])
-        return palette[sides(shape, m)]
+        return side_colors(sides(shape, m))
     if mode == "partner":
         base = smooth_colors(shape.vertices)
         rgb = 0.5 * (base + base[np.where(none, np.arange(len(m)), m)])

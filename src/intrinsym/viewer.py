@@ -394,7 +394,7 @@ def map_data(shape: Shape, symmetry_map: np.ndarray) -> dict[str, Any]:
     side = coloring.sides(shape, symmetry_map)
     one = np.flatnonzero(side == 0)
     across = np.mean(shape.vertices[one] - shape.vertices[symmetry_map[one]], axis=0) if len(one) else np.zeros(3)
-    colors = {mode: coloring.vertex_colors(shape, symmetry_map, mode) for mode in ("side", "partner")}
+    colors = {"side": coloring.side_colors(side), "partner": coloring.vertex_colors(shape, symmetry_map, "partner")}
     return {
         "map_colors": {mode: pack(np.round(255 * rgb).astype(np.uint8)) for mode, rgb in colors.items()},
         "legends": {
