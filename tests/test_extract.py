@@ -152,6 +152,19 @@ def test_extraction_global_symmetry_follows_global_index():
     assert Extraction([], -1, params).global_symmetry is None
 
 
+def test_the_dominant_symmetry_is_the_global_one_else_the_widest_partial():
+    a = Symmetry(np.arange(3), np.arange(3) + 1, 0.5, 1.0, "partial")
+    b = Symmetry(np.arange(5), np.arange(5) + 1, 0.4, 1.0, "partial")
+    c = Symmetry(np.arange(2), np.arange(2) + 1, 0.3, 1.0, "global")
+    same = Symmetry(np.arange(5) + 1, np.arange(5), 0.2, 1.0, "partial")
+    identity = Symmetry(np.arange(9), np.arange(9), 0.9, 1.0, "identity")
+    params = ExtractParams()
+    assert Extraction([a, b, c], 2, params).dominant_symmetry is c
+    assert Extraction([identity, a, b, same], -1, params).dominant_index == 2  # the best ranked of equals
+    assert Extraction([identity], -1, params).dominant_symmetry is None
+    assert Extraction([], -1, params).dominant_index == -1
+
+
 def test_extract_partial_symmetry_is_not_global():
     m = marginals(with_mirror=[1, 2, 3])
     result = extract(m, GRAPH, TARGETS, ExtractParams(d_error=0.01), self_target=SELF)

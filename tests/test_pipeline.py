@@ -65,6 +65,11 @@ def test_result_contract(spot, spot_result, tmp_path):
             intrinsym.Result.ARRAYS + Support.KEYS + ("source_mesh_vertices", "zoomout_map", "map_distortion")
         )
     assert (out / "symmetry_mass.npy").is_file()
+    # every symmetry as a vertex map, the dominant one's row the symmetry map; its coverage listed
+    maps, listed = np.load(out / "symmetry_maps.npy"), json.loads((out / "symmetries.json").read_text())
+    assert maps.shape == (len(listed), len(spot.vertices)) and maps.dtype == np.int32
+    assert np.array_equal(maps[r.extraction.dominant_index], np.load(out / "symmetry_map.npy"))
+    assert [e["coverage"] for e in listed] == pytest.approx(list((maps >= 0).mean(axis=1)), abs=1e-6)
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
     assert json.loads((out / "run.json").read_text())["format_version"] == 3
 

@@ -27,6 +27,7 @@ from . import (
     extract,
     files,
     params,
+    partial_truth,
     pipeline,
     resources,
     shapes,
@@ -39,7 +40,7 @@ from .batching import command as batch_command
 from .errors import InputError, IntrinsymError, ParameterError
 from .io import load
 from .progress import BPIteration, ProgressEvent, next_stage
-from .records import records
+from .records import part_vertices, records
 from .result import Result, saved_global_confidence
 
 
@@ -134,9 +135,15 @@ def build_parser(full: bool = False) -> argparse.ArgumentParser:
         "--symmetry-map",
         required=True,
         action="append",
-        help="ground truth: TOSCA .sym, KIDS sym.txt or 0-based .npy (-1: no image, as in a partial symmetry; "
-        "such vertices are not scored; shape (K, V): K true maps, a symmetry group); repeat for several true "
-        "maps: each found symmetry is scored against its nearest one (docs/format.md)",
+        help="ground truth: TOSCA .sym, KIDS sym.txt, 0-based .npy (-1: no partner, -2: not scored; shape (K, V): "
+        "K true maps, a symmetry group) or a SHREC'16 .baryc_gt_sym (with its .baryc_gt beside it); repeat for "
+        "several true maps: each found symmetry is scored against its nearest one. With -1 entries, or "
+        "--reference, scores.json also holds the partial-symmetry scores (docs/format.md)",
+    )
+    e.add_argument(
+        "--reference",
+        help="the complete shape whose sqrt(area) is the unit of the partial-symmetry scores: a SHREC'16 "
+        "truth's null shape (default: ../null/<class>.off beside it); otherwise default the mesh itself",
     )
     e.add_argument("--mesh", help="the mesh the result was computed on (default: the input named in run.json)")
     e.add_argument("--seed", type=int, default=0, help="seed of the decoy choice (default 0)")
@@ -430,9 +437,10 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError(f"{out}: no symmetry_map.npy to segment (rerun intrinsym detect)")
     n = len(shape.vertices)
     found = evaluate.load_symmetry_map(out / "symmetry_map.npy", n, allow_missing=True) if has_map else None
-    truths = symmetry_group.load_truths(args.symmetry_map, shape)
+    truths = symmetry_group.load_truths(args.symmetry_map, shape, args.reference)
     nearest, group = symmetry_group.group_report(truths, found, viz.load_symmetries(out), shape)
-    sym = truths[nearest].partner
+    truth = truths[nearest]
+    sym = truth.partner
     conf_path = out / "symmetry_confidence.npy"
     report, maps = evaluate.evaluation_report(
         result.marginals,
@@ -448,6 +456,9 @@ def _run(args: argparse.Namespace) -> int:
     if maps is not None:
         evaluate.plot_curve(maps, out / "curve.png")
     report["group"] = group
+    shrec = any(Path(path).suffix == ".baryc_gt_sym" for path in args.symmetry_map)
+    if found is not None and (args.reference or shrec or np.any(sym < 0)):
+        report["partial"] = partial_truth.partial_report(found, shape, truth, _best_parts(out, n))
     evaluate.save_scores(report, out / "scores.json")
     if args.json:
         print(json.dumps(report, indent=2))
@@ -473,6 +484,14 @@ def _run(args: argparse.Namespace) -> int:
                     f"{c['expected_calibration_error']:.3f}, mean {c['confidence']:.3f} against "
                     f"{c['within']:.3f} measured within {c['threshold']} sqrt(area)"
                 )
+        if "partial" in report:
+            q = report["partial"]
+            print(
+                f"partial symmetry (units of sqrt(area) {q['unit']:.4g}): balanced {q['balanced']:.3f}  "
+                f"partnered within 0.05 {q['partnered_within_005']:.3f} / 0.10 {q['partnered_within_010']:.3f} "
+                f"({q['n_partnered']} vertices)  unpartnered left unmapped {q['unpartnered_unmapped']:.3f} "
+                f"({q['n_unpartnered']} vertices)  IoU of the best symmetry's parts {q['iou']}"
+            )
         for line in symmetry_group.group_lines(group):
             print(line)
         distortion = report["truth_distortion"]
@@ -481,6 +500,17 @@ def _run(args: argparse.Namespace) -> int:
             line += f"global map {report['map']['distortion']['above_0.05']:.3f}, "
         print(line + f"ground truth {distortion['above_0.05']:.3f}")
     return 0
+
+
+def _best_parts(out: Path, n: int) -> np.ndarray | None:
+    """(n,) bool: the input vertices of the best-ranked symmetry's two parts; None without one."""
+    found = viz.load_symmetries(out)
+    if not found:
+        return None
+    mask = np.zeros(n, dtype=bool)
+    for part in part_vertices(found[0]):
+        mask[part] = True
+    return mask
 
 
 def _query(args: argparse.Namespace, result: Result, out: Path) -> int:

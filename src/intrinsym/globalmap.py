@@ -39,7 +39,7 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 
 from . import distortion, neighbours, spectral
-from .confidence import kept_mass, mass_within
+from .confidence import DISAGREEMENT_RANGE, INVOLUTIVE_SHARE, disagreement, kept_mass, mass_within
 from .extract import Symmetry
 from .params import (
     CARRY_SAMPLES,
@@ -362,6 +362,37 @@ def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) ->
     out = vertex_map.copy()
     out[has[moved]] = _input_images(surface, image[moved])
     return out
+
+
+def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) -> np.ndarray:
+    """The dominant symmetry's map with -1 where it has no support: a reflection that does
+    not return a vertex to within ``DISAGREEMENT_RANGE`` of itself.
+
+    On an incomplete shape, the vertices whose partner is missing still get an image
+    (ZoomOut and the refinement map every vertex; a partial symmetry's part can reach past
+    its partner), on the partner side's remains; that image's own image is its true
+    partner, far from the vertex. A vertex whose round trip is that long has its image or
+    its image's image off by half of it at least, so the map is not the symmetry there
+    (its confidence is at its floor, :func:`intrinsym.confidence.score`). A map that
+    returns fewer than ``INVOLUTIVE_SHARE`` of the vertices it maps is no reflection (a
+    rotation of higher order) and keeps every image.
+
+    Parameters
+    ----------
+    vertex_map : (N,) int64
+        Image input vertex of every input vertex, -1 for none.
+    vertices : (N, 3) float
+        Input vertex positions.
+    scale : float
+        sqrt(area) of the shape, in input units.
+    """
+    image = np.asarray(vertex_map, dtype=np.int64)
+    twice = np.where(image >= 0, image[np.maximum(image, 0)], -1)
+    trip = disagreement(vertices, twice, np.arange(len(image)), scale)
+    mapped = image >= 0
+    if not mapped.any() or np.mean(trip[mapped] < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
+        return image
+    return np.where(trip >= DISAGREEMENT_RANGE, -1, image)
 
 
 def local_map_distortion(surface: Surface, vertex_map: np.ndarray) -> np.ndarray:

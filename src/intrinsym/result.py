@@ -25,6 +25,7 @@ from .confidence import calibrated, carried_confidence, disagreement, map_mass, 
 from .errors import ResultError
 from .extract import Extraction, ExtractParams, Symmetry
 from .files import Writer, npz_headers, save_npz, write_set
+from .globalmap import supported_map
 from .modes import two_modes
 from .params import Params
 from .runinfo import RunInfo, Sizes, stored_params
@@ -101,6 +102,7 @@ class Result:
         "run.json",
         "symmetries.json",
         "symmetry_map.npy",
+        "symmetry_maps.npy",
         "symmetry_mass.npy",
         "symmetry_confidence.npy",
         "modes.json",
@@ -158,8 +160,11 @@ class Result:
         return out
 
     def symmetry_map(self) -> np.ndarray:
-        """(N_in,) int64: the image of every input vertex under the global symmetry
-        (``symmetry_map.npy``), -1 everywhere when there is none.
+        """(N_in,) int64: the image of every input vertex under the dominant symmetry
+        (``symmetry_map.npy``; :attr:`intrinsym.symmetry.Extraction.dominant_index`: the
+        global one, else the partial one over the most of the shape), -1 where it has no
+        support (off its parts, where the map does not return a vertex to itself) and
+        everywhere when there is none.
 
         The global map the run chose (``zoomout_map``,
         :func:`intrinsym.globalmap.choose_global_map`) when it made one, else the
@@ -169,21 +174,39 @@ class Result:
         if self.support is None or self.extraction is None:
             raise ValueError("the result has no extraction")
         if self.zoomout_map is not None:
-            return np.asarray(self.zoomout_map, dtype=np.int64)
-        return self.extraction_map()
+            return np.asarray(self.zoomout_map, dtype=np.int64)  # supported_map of the run's global map
+        if self.support.source_mesh_vertices is None:
+            return self.extraction_map()
+        return supported_map(self.extraction_map(), self.support.source_mesh_vertices, self.info.resolved.scale)
 
     def extraction_map(self) -> np.ndarray:
-        """(N_in,) int64: the extraction's own vertex map of the global symmetry
-        (:func:`intrinsym.vertex_maps.fitted_vertex_map`), -1 everywhere when there is
-        none; the symmetry map when the run chose no other. Needs ``support`` and
-        ``extraction``."""
+        """(N_in,) int64: the extraction's own vertex map of the dominant symmetry
+        (:func:`intrinsym.vertex_maps.fitted_vertex_map`, -1 off its parts), -1
+        everywhere when there is none; the symmetry map when the run chose no other.
+        Needs ``support`` and ``extraction``."""
         if self.support is None or self.extraction is None:
             raise ValueError("the result has no extraction")
-        sym = self.extraction.global_symmetry
-        if sym is None:
+        return self._fitted_map(self.extraction.dominant_index)
+
+    def symmetry_maps(self) -> np.ndarray:
+        """(K, N_in) int64: the image of every input vertex under each of the K symmetries
+        of ``symmetries.json`` in its order (``symmetry_maps.npy``), -1 off its parts; the
+        dominant one's row is :meth:`symmetry_map`. Needs ``support`` and ``extraction``."""
+        if self.support is None or self.extraction is None:
+            raise ValueError("the result has no extraction")
+        dominant = self.extraction.dominant_index
+        rows = [
+            self.symmetry_map() if k == dominant else self._fitted_map(k)
+            for k in range(len(self.extraction.symmetries))
+        ]
+        return np.stack(rows) if rows else np.empty((0, len(self.support.vertex_source)), dtype=np.int64)
+
+    def _fitted_map(self, index: int) -> np.ndarray:
+        assert self.support is not None and self.extraction is not None
+        if index < 0:
             return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
         return fitted_vertex_map(
-            sym,
+            self.extraction.symmetries[index],
             self.support,
             self.edges,
             self.source_points,
@@ -238,9 +261,9 @@ class Result:
 
     def global_confidence(self) -> float | None:
         """The expected share of vertices whose image lies within 0.05 sqrt(area) of the
-        true one: the mean of :meth:`symmetry_confidence` over the input vertices; None
-        without a global symmetry."""
-        if self.global_symmetry is None:
+        true one: the mean of :meth:`symmetry_confidence` over the input vertices (0 where
+        the dominant symmetry gives none); None without a dominant symmetry."""
+        if self.extraction is None or self.extraction.dominant_symmetry is None:
             return None
         return float(np.mean(self.symmetry_confidence()))
 
@@ -316,9 +339,12 @@ class Result:
             listed = records.records(
                 self.extraction.symmetries, self.source_point_vertex, self.target_point_vertex, self.support
             )
-            vmap = self.symmetry_map()
+            vmap, maps = self.symmetry_map(), self.symmetry_maps()
+            for entry, row in zip(listed, maps):
+                entry["coverage"] = round(float(np.mean(row >= 0)), 6)
             writers["symmetries.json"] = write_json(listed)
             writers["symmetry_map.npy"] = lambda path: np.save(path, vmap)
+            writers["symmetry_maps.npy"] = lambda path: np.save(path, maps.astype(np.int32))
             mass = self.symmetry_mass()
             conf = self.symmetry_confidence(mass)
             writers["symmetry_mass.npy"] = lambda path: np.save(path, mass)

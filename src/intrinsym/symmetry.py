@@ -147,3 +147,19 @@ class Extraction:
     def global_symmetry(self) -> Symmetry | None:
         """The global symmetry (``symmetries[global_index]``), None when there is none."""
         return self.symmetries[self.global_index] if self.global_index >= 0 else None
+
+    @property
+    def dominant_index(self) -> int:
+        """Index into ``symmetries`` of the dominant symmetry: the global one, else the
+        non-identity one over the most source samples (the best ranked of equals); -1
+        when there is none. On an incomplete shape the symmetry of what is there is
+        partial: it is the dominant one, not "nothing"."""
+        if self.global_index >= 0:
+            return self.global_index
+        found = [i for i, sym in enumerate(self.symmetries) if sym.kind != "identity"]
+        return max(found, key=lambda i: len(self.symmetries[i].source)) if found else -1
+
+    @property
+    def dominant_symmetry(self) -> Symmetry | None:
+        """The dominant symmetry (:attr:`dominant_index`), None when there is none."""
+        return self.symmetries[self.dominant_index] if self.dominant_index >= 0 else None
