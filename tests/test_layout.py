@@ -89,3 +89,37 @@ def test_the_cli_starts_without_the_optional_heavy_imports():
     code = "import sys, intrinsym.cli, intrinsym.pipeline; print(sorted({'trimesh', 'matplotlib'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+#: The modules of the extras [batch] and [viz] (intrinsym.extras): a core install lacks them.
+EXTRA_MODULES = ("dask", "distributed", "bokeh", "pandas", "pyarrow", "matplotlib")
+
+
+def test_a_core_install_detects_and_names_each_missing_extra_in_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        f"for name in {EXTRA_MODULES!r}: sys.modules[name] = None  # as if not installed\n"
+        "from intrinsym.cli import main\n"
+        "code = main(sys.argv[1:])\n"
+        f"assert not set({EXTRA_MODULES!r}) & {{name for name, m in sys.modules.items() if m is not None}}\n"
+        "sys.exit(code)\n"
+    )
+
+    def run(*argv: str) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=tmp_path)
+
+    done = run("detect", "--example", "--source", "40", "--target", "400", "-o", "spot", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "spot" / "symmetry_map.npy").is_file()
+    for argv, what, extra in [
+        (("batch", "spot.off", "-o", "many"), "intrinsym batch", "batch"),
+        (("render", "spot"), "intrinsym render", "viz"),
+        (("detect", "--example", "-o", "again", "--figures"), "intrinsym detect --figures", "viz"),
+    ]:
+        done = run(*argv)
+        assert (done.returncode, done.stdout) == (2, ""), argv
+        assert done.stderr == f"intrinsym: error: {what} needs the [{extra}] extra: pip install 'intrinsym[{extra}]'\n"
+    assert not (tmp_path / "again").exists()

@@ -38,6 +38,7 @@ from . import (
 )
 from .batching import command as batch_command
 from .errors import InputError, IntrinsymError, ParameterError
+from .extras import available, require
 from .io import load
 from .progress import BPIteration, ProgressEvent, next_stage
 from .records import part_vertices, records
@@ -307,6 +308,7 @@ def _result_dir(path: str) -> Path:
 def _render_or_view(args: argparse.Namespace) -> int:
     out = _result_dir(args.out)
     if args.command == "render":
+        require("viz", "intrinsym render")
         files.check_output_dir(out / "figures")
     else:
         files.check_output_file(args.html if args.html is not None else out / "viewer.html")
@@ -387,6 +389,8 @@ def _bench(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if getattr(args, "figures", False):
+        require("viz", f"intrinsym {args.command} --figures")
     if args.command == "batch":
         render = functools.partial(viz.render, params=viz.FigureParams(up=args.up)) if args.figures else None
         return batch_command.run(args, _overrides(args), render)
@@ -453,8 +457,10 @@ def _run(args: argparse.Namespace) -> int:
         seed=args.seed,
         confidence=evaluate.load_confidence(conf_path, n) if has_map and conf_path.is_file() else None,
     )
-    if maps is not None:
+    if maps is not None and available("viz"):
         evaluate.plot_curve(maps, out / "curve.png")
+    elif maps is not None:
+        print("intrinsym: no curve.png: it needs the [viz] extra: pip install 'intrinsym[viz]'", file=sys.stderr)
     report["group"] = group
     shrec = any(Path(path).suffix == ".baryc_gt_sym" for path in args.symmetry_map)
     if found is not None and (args.reference or shrec or np.any(sym < 0)):

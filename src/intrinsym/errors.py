@@ -71,6 +71,11 @@ class OutputError(IntrinsymError):
         super().__init__(_join_lines(message))
 
 
+class MissingExtraError(IntrinsymError, ImportError):
+    """An optional dependency that is not installed: ``str(err)`` is one line naming what
+    needs it and the extra that installs it (:mod:`intrinsym.extras`)."""
+
+
 class ResultError(IntrinsymError):
     """A result folder that cannot be read (a missing, truncated or corrupt file);
     ``str(err)`` is one line naming the file."""

@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 from . import coloring
 from .errors import InputError, ParameterError
 from .evaluate import load_symmetry_map
+from .extras import require
 from .files import atomic_write
 from .io import load
 from .records import part_vertices
@@ -484,6 +485,7 @@ def render(
         ``marginal.png``, ``graph.png``, ``global_symmetry.png`` (with ``symmetry_map.npy``:
         :func:`symmetry_map_figure`) and ``symmetry_<k>.png`` per extracted symmetry.
     """
+    require("viz", "intrinsym.viz.render")
     result = Result.load(out_dir)
     target, source_shape = load_shapes(result, mesh_path)
     if target.is_cloud or (source_shape is not None and source_shape.is_cloud):

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import ParameterError
+from ..extras import require
 from ..params import Params
 from ..pipeline import resolve_params
 from . import engine
@@ -116,6 +117,7 @@ def batch(
     KeyboardInterrupt
         After writing the summary of what finished (the rest as "interrupted").
     """
+    require("batch", "intrinsym.batch")
     from . import summary
 
     say = message or log.info
@@ -205,6 +207,8 @@ def _with_unfinished(
 def report(out: str | os.PathLike) -> tuple[pd.DataFrame, Path]:
     """The aggregate table of a batch's summary (per class: mean and worst score) and the
     plot ``out/report.png`` (score distribution; seconds against vertices)."""
+    require("batch", "intrinsym.batching.report")
+    require("viz", "intrinsym.batching.report")
     from . import summary
 
     frame = summary.read(out)

@@ -15,6 +15,7 @@ from rich.table import Table
 
 from .. import text_tables
 from ..errors import ParameterError
+from ..extras import require
 from ..params import make_params
 from . import batch, engine, report
 from .engine import Counts
@@ -137,6 +138,9 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], after_save: AfterSa
     """Run ``intrinsym batch``; exit code 0, or 1 when an item failed."""
     if not args.inputs and not args.report:
         raise ParameterError("batch needs INPUT... (or --report to report on OUT)")
+    require("batch", "intrinsym batch")
+    if args.report:
+        require("viz", "intrinsym batch --report")
     engine.check_workers(args.workers, "--workers")
     quiet = args.quiet or args.json
     console = Console(stderr=True, quiet=quiet)
