@@ -6,27 +6,28 @@ import json
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 import intrinsym
-from intrinsym import modes, pipeline, shapes
+from intrinsym import evaluate, geodesics, modes, shapes
 from intrinsym.shape import from_arrays, surface_area
-from intrinsym.surface import prepare_pair, sample
+from intrinsym.surface import prepare_pair
 
 
-def _cut(shape: shapes.GeneratedShape, z: float) -> tuple[intrinsym.Shape, np.ndarray]:
-    """The faces of ``shape`` above height ``z``, and the original index of each kept vertex."""
-    keep = shape.vertices[:, 2] > z
-    faces = shape.faces[keep[shape.faces].all(axis=1)]
-    used = np.unique(faces)
-    new = np.full(len(shape.vertices), -1)
+def _cut(vertices: np.ndarray, faces: np.ndarray, z: float) -> tuple[intrinsym.Shape, np.ndarray]:
+    """The triangles above height ``z``, and the original index of each kept vertex."""
+    keep = vertices[:, 2] > z
+    kept = faces[keep[faces].all(axis=1)]
+    used = np.unique(kept)
+    new = np.full(len(vertices), -1)
     new[used] = np.arange(len(used))
-    return from_arrays(shape.vertices[used], new[faces]), used
+    return from_arrays(vertices[used], new[kept]), used
 
 
 @pytest.fixture(scope="module")
 def half_and_whole() -> tuple[intrinsym.Shape, intrinsym.Shape, np.ndarray]:
     whole = shapes.partial(6)
-    half, used = _cut(whole, -0.1)
+    half, used = _cut(whole.vertices, whole.faces, -0.1)
     return half, from_arrays(whole.vertices, whole.faces), used
 
 
@@ -42,22 +43,26 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
-def test_a_half_finds_its_place_on_the_whole_only_in_a_common_unit(half_and_whole):
-    """The unary of match(half, whole): each half sample's best target lies within 0.1
-    of its own point on most samples in the common unit, on few when the half is blown
-    up to unit area."""
-    half, whole, used = half_and_whole
-    unit = np.sqrt(surface_area(whole))
+def test_half_of_spot_matches_spot_within_005():
+    """Spot with its half below z = 0 cut away, matched to spot: within 0.05 sqrt(area)
+    of its true point or of its mirror point (geodesic) on most vertices in the common
+    unit; on few when the half is blown up to unit area."""
+    spot = intrinsym.load(intrinsym.example_path())
+    half, used = _cut(spot.vertices, spot.faces, 0.0)
+    unit = np.sqrt(surface_area(spot))
+    graph = geodesics.surface_graph(spot.vertices / unit, spot.faces)
+    mirror = cKDTree(spot.vertices).query(spot.vertices[used] * [-1.0, 1.0, 1.0])[1]
     right = {}
-    for scale in ("larger", "each"):
-        p = intrinsym.make_params(n_source=30, n_target=300, unary="spin", match_scale=scale)
-        src, tgt = prepare_pair(half, whole, 0, scale)
-        ps, pt = sample(src, p.n_source, None, 1), sample(tgt, p.n_target, None, 0)
-        phi, *_ = pipeline.unary_model(src, tgt, ps, pt, p, False, 0.05)
-        best = tgt.to_input(tgt.shape.vertices[pt[phi.argmax(axis=1)]])
-        true = whole.vertices[used[src.nearest_input_vertex(src.shape.vertices[ps])]]
-        right[scale] = np.mean(np.linalg.norm(best - true, axis=1) / unit <= 0.1)
-    assert right["larger"] >= 0.6
+    # "larger" (the default) takes partial_unary for the part by itself; "each" sees two
+    # unit areas and is given the same unary
+    for scale, unary in (("larger", None), ("each", "spin")):
+        p = intrinsym.make_params(n_source=150, n_target=1500, match_scale=scale, **({"unary": unary} if unary else {}))
+        result = intrinsym.match(half, spot, p)
+        assert result.params.unary == "spin"
+        found = result.symmetry_map()
+        error = np.minimum(evaluate.map_errors(found, used, graph), evaluate.map_errors(found, mirror, graph))
+        right[scale] = np.mean(error <= 0.05)
+    assert right["larger"] >= 0.8
     assert right["each"] <= 0.3
 
 
@@ -66,6 +71,7 @@ def test_a_symmetric_pair_reports_both_answers(tmp_path):
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
     result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500))
+    assert result.params.unary == intrinsym.make_params().unary  # one whole shape and another
     two = modes.two_modes(result)
     assert two.both
     assert 0.3 <= two.confidence[0] <= 0.7 and two.confidence.sum() == pytest.approx(1.0)

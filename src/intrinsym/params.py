@@ -28,6 +28,11 @@ MatchScale = Literal["larger", "each"]
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
+#: ``match`` uses ``partial_unary`` when the smaller shape's area is below this share of
+#: the larger's (in the common unit of ``match_scale="larger"``): posed frames of one
+#: object keep their area within a few per cent, a SHREC'16 partial shape keeps 0.12-0.93
+#: of it (measured in docs/results.md).
+PARTIAL_AREA = 0.95
 #: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity.
 NO_PARTNER_WEIGHT = 0.7
 #: A round trip through BP's argmax "returns" within this distance (sqrt(area) units) of
@@ -175,6 +180,13 @@ class Params:
         "spin radii), wks, hks, joined by '*' (their potentials multiply)",
         "unary",
         paper="spin",
+    )
+    partial_unary: str = _p(
+        "spin",
+        f"unary terms of a match whose smaller shape has less than {PARTIAL_AREA} of the larger's area (a "
+        "part matched to a whole): a part's spectral terms differ from the whole's",
+        "unary",
+        match_only=True,
     )
     potential: Potential = _p(
         "calibrated",
@@ -404,13 +416,15 @@ class Params:
             (not self.mass_radius > 0, "mass_radius must be positive"),
             (self.passes is not None and self.passes < 1, "passes must be at least 1"),
             (self.pass_radius <= 0, "pass_radius must be positive"),
-            (
-                any(t not in UNARY_TERMS for t in self.unary_terms)
-                or len(set(self.unary_terms)) < len(self.unary_terms),
-                f"unary must be distinct terms of {UNARY_TERMS} joined by '*'",
+            *(
+                (
+                    any(t not in UNARY_TERMS for t in terms) or len(set(terms)) < len(terms),
+                    f"{name} must be distinct terms of {UNARY_TERMS} joined by '*'",
+                )
+                for name, terms in (("unary", self.unary_terms), ("partial_unary", self.partial_unary.split("*")))
             ),
             (
-                self.potential == "paper" and self.unary not in ("spin", "spin-multi"),
+                self.potential == "paper" and not {self.unary, self.partial_unary} <= {"spin", "spin-multi"},
                 "potential 'paper' (Eq. 5) applies to a single spin-image term only",
             ),
             (not 2 <= self.eigenpairs <= MAX_EIGENPAIRS, f"eigenpairs must lie in [2, {MAX_EIGENPAIRS}]"),

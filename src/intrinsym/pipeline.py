@@ -23,11 +23,20 @@ from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
 from .extract import Extraction, consistency, extract_from_support
 from .globalmap import GlobalMap, choose_global_map, local_map_distortion
-from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, RETURN_RADIUS, WORK_PER_SAMPLE, Params, make_params
+from .params import (
+    NO_PARTNER_WEIGHT,
+    OFFSET_TARGETS,
+    PARTIAL_AREA,
+    RETURN_RADIUS,
+    WORK_PER_SAMPLE,
+    Params,
+    make_params,
+)
 from .progress import BPIteration, ProgressCallback, StageDone
 from .reflection import reflection
 from .result import Result
 from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
+from .shape import surface_area
 from .support import SourceGraph, Support
 from .surface import ShapeLike, Surface, as_shape, prepare, prepare_pair, sample
 
@@ -549,6 +558,9 @@ def match(
     Both shapes are measured in one unit, sqrt(area) of the larger
     (``params.match_scale="larger"``), so that a part matched to a whole keeps its size;
     ``"each"`` normalises each to unit area, for one object in different units.
+    When the smaller has less than ``PARTIAL_AREA`` of the larger's area, the unary is
+    ``params.partial_unary`` (the result's ``params.unary`` says which ran): a part's
+    Laplace-Beltrami spectrum, and so its WKS, is not the whole's.
     Parameters as in :func:`detect`; the trivial match does not apply.
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
@@ -557,6 +569,8 @@ def match(
     sa, sb = as_shape(a), as_shape(b)
     clock.lap("load")
     surf_a, surf_b = prepare_pair(sa, sb, _min_vertices(p), p.match_scale)
+    if min(surface_area(surf_a.shape), surface_area(surf_b.shape)) < PARTIAL_AREA:
+        p = dataclasses.replace(p, unary=p.partial_unary)
     clock.lap("prepare")
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")

@@ -163,8 +163,8 @@ class Result:
         """(N_in,) int64: the image of every input vertex under the dominant symmetry
         (``symmetry_map.npy``; :attr:`intrinsym.symmetry.Extraction.dominant_index`: the
         global one, else the partial one over the most of the shape), -1 where it has no
-        support (off its parts, where the map does not return a vertex to itself) and
-        everywhere when there is none.
+        support (off its parts; in ``detect``, where the map does not return a vertex to
+        itself) and everywhere when there is none.
 
         The global map the run chose (``zoomout_map``,
         :func:`intrinsym.globalmap.choose_global_map`) when it made one, else the
@@ -175,8 +175,8 @@ class Result:
             raise ValueError("the result has no extraction")
         if self.zoomout_map is not None:
             return np.asarray(self.zoomout_map, dtype=np.int64)  # supported_map of the run's global map
-        if self.support.source_mesh_vertices is None:
-            return self.extraction_map()
+        if self.support.source_mesh_vertices is None or not self.support.self_match:
+            return self.extraction_map()  # a match maps onto another shape: no round trip
         return supported_map(self.extraction_map(), self.support.source_mesh_vertices, self.info.resolved.scale)
 
     def extraction_map(self) -> np.ndarray:
