@@ -32,7 +32,7 @@ import os
 import sys
 import time
 import traceback
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
@@ -145,10 +145,14 @@ def _cached(cache: Path | None, path: Path, method: str, key: dict) -> dict | No
     return row if all(row.get(k) == v for k, v in key.items()) else None
 
 
-def _work(path: Path, method: str, cache: Path | None, key: dict, overrides: Mapping) -> dict:
+#: One shape under one method with the Params overrides: its row.
+Runner = Callable[[Path, str, Mapping], dict]
+
+
+def _work(path: Path, method: str, cache: Path | None, key: dict, overrides: Mapping, runner: Runner) -> dict:
     """Worker: one shape and method, written to the cache (atomically) when there is one."""
     try:
-        row = {**run(path, method, overrides), **key, "machine": _machine()}
+        row = {**runner(path, method, overrides), **key, "machine": _machine()}
     except Exception as err:  # a failed shape is a row, not the end of the run
         row = {"shape": path.stem, "method": method, "error": f"{type(err).__name__}: {err}"}
         traceback.print_exc()
@@ -205,8 +209,22 @@ def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def run_script(
+    argv: list[str] | None,
+    doc: str,
+    methods: list[str],
+    runner: Runner,
+    table: Callable[[dict[tuple[str, str], dict], list[str], list[str]], str],
+    status: str,
+    cache_folder: str | None = None,
+) -> int:
+    """The command line of a SHREC'16 script (this one's, ``shrec16_match.py``'s): the
+    options, the cache, the runs (``runner`` per shape and method, pyFM's after
+    ``methods`` unless ``--no-pyfm``), the progress lines (the row's ``status`` score)
+    and the table; exit 1 when a run failed. ``cache_folder``: a subfolder of ``--cache``
+    for this script's files."""
+    script = Path(str(sys.modules[runner.__module__].__file__)).name
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     add_data_argument(parser)
     parser.add_argument("--shapes", nargs="+", metavar="NAME", help="shape names or prefixes (default: all)")
     parser.add_argument("--jobs", type=int, default=1, help="shapes run at once (default 1)")
@@ -224,16 +242,17 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--param {err}")
     data = data_folder(args.data)
     if data is None or not (data / "shrec16_partial").is_dir():
-        print(no_data("partial.py", args.data))
+        print(no_data(script, args.data))
         return 0
+    cache = args.cache / cache_folder if args.cache is not None and cache_folder else args.cache
     todo = select(shapes(data), args.shapes)
-    methods = ["intrinsym", "none"] + ([] if args.no_pyfm else ["pyfm"])
+    methods = methods + ([] if args.no_pyfm else ["pyfm"])
     rows: dict[tuple[str, str], dict] = {}
     pending = []
     for path in todo:
         for method in methods:
             key = _key(method, args.tag, overrides)
-            row = _cached(args.cache, path, method, key)
+            row = _cached(cache, path, method, key)
             if row is not None:
                 rows[path.stem, method] = row
             else:
@@ -242,22 +261,26 @@ def main(argv: list[str] | None = None) -> int:
 
     def done(row: dict) -> None:
         rows[row["shape"], row["method"]] = row
-        status = row.get("error") or f"balanced {_value(row, 'balanced'):.3f}, {_value(row, 'seconds'):.1f} s"
-        print(f"{row['shape']} {row['method']}: {status} [{time.perf_counter() - start:.0f} s]", file=sys.stderr)
+        line = row.get("error") or f"{status} {_value(row, status):.3f}, {_value(row, 'seconds'):.1f} s"
+        print(f"{row['shape']} {row['method']}: {line} [{time.perf_counter() - start:.0f} s]", file=sys.stderr)
 
     if args.jobs == 1:
         for path, method, key in pending:
-            done(_work(path, method, args.cache, key, overrides))
+            done(_work(path, method, cache, key, overrides, runner))
     else:
         with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(_work, path, method, args.cache, key, overrides) for path, method, key in pending]
+            futures = [pool.submit(_work, path, method, cache, key, overrides, runner) for path, method, key in pending]
             for future in as_completed(futures):
                 done(future.result())
-    table = markdown(rows, [p.stem for p in todo], methods)
-    print(table, end="")
+    text = table(rows, [p.stem for p in todo], methods)
+    print(text, end="")
     if args.out:
-        args.out.write_text(table)
+        args.out.write_text(text)
     return 1 if any("error" in r for r in rows.values()) else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_script(argv, __doc__, ["intrinsym", "none"], run, markdown, "balanced")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,192 @@
+"""Partial-to-full matching on SHREC'16 (cuts, holes), beside pyFM, with both answers scored.
+
+Runs the default :func:`intrinsym.match` (seed 0: the common unit, a part's unary
+``partial_unary``) of every partial shape of ``shrec16_partial/{cuts,holes}`` to its null
+shape and scores it with the SHREC'16 convention: per vertex of the partial shape, the
+geodesic distance on the null shape (mesh edges, :func:`intrinsym.partial_truth.edge_graph`)
+from the predicted image to the nearer of its true point and its mirror point (each taken
+at its nearest null vertex), in units of sqrt(area(null)); the shares within 0.05, 0.10 and 0.25 and the
+mean (over mapped vertices; an unmapped vertex counts as a miss in the shares).
+
+Beside it, pyFM from partial to full (PyPI ``pyfmaps``: WKS, ``fit``, ZoomOut 20 ->
+100), and the scores of intrinsym's marginals and modes: per source sample whose true
+and mirror points lie more than 0.10 apart, the share whose first-pass marginal puts
+at least 0.1 of its mass within 0.05 of each ("both modes"), of the true one alone and
+of the mirror one alone; the two maps of :func:`intrinsym.modes.two_modes` (mode 0
+within 0.10 of the true point, mode 1 within 0.10 of the mirror, each on its own) and
+their confidences. Command::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/shrec16_match.py --data DATA [--cache DIR --tag TAG]
+        [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [-o TABLE.md]
+
+``DATA`` holds ``shrec16_partial/`` (default ``$INTRINSYM_DATA``; skipped, exit 0, when
+absent). ``--shapes`` and ``--cache`` as in ``benchmarks/partial.py`` (one JSON file per
+shape and method, ``DIR/match/<shape>.<method>.json``, reused when its tag, version and
+parameters match, so an interrupted run resumes). ``--jobs N`` runs N at once.
+
+Output: one Markdown table, a row per shape, then the mean and worst rows per kind,
+per class and over all shapes.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+import intrinsym
+from intrinsym import evaluate, modes, partial_truth
+from intrinsym.shape import surface_area
+from partial import _value, run_script
+
+#: Cache-format revision: a file with another one is recomputed.
+CACHE_FORMAT = 1
+#: The contest's thresholds (units of sqrt(area(null))).
+THRESHOLDS = (0.05, 0.10, 0.25)
+#: A source sample scores "both modes" when its true and mirror points are this far apart ...
+FAR = 0.10
+#: ... and its marginal holds at least MODE_MASS within MODE_RADIUS of each.
+MODE_MASS = 0.1
+MODE_RADIUS = 0.05
+#: Scores of a row, with their table headers; the methods that have them.
+SCORES = (
+    ("within_005", "≤0.05", ("intrinsym", "pyfm")),
+    ("within_010", "≤0.10", ("intrinsym", "pyfm")),
+    ("within_025", "≤0.25", ("intrinsym", "pyfm")),
+    ("mean_error", "mean error", ("intrinsym", "pyfm")),
+    ("both_modes", "both modes", ("intrinsym",)),
+    ("true_only", "true mode only", ("intrinsym",)),
+    ("mode0_true_010", "mode 0 ≤0.10 true", ("intrinsym",)),
+    ("mode1_mirror_010", "mode 1 ≤0.10 mirror", ("intrinsym",)),
+    ("confidence0", "confidence mode 0", ("intrinsym",)),
+    ("seconds", "seconds", ("intrinsym", "pyfm")),
+)
+
+
+def pyfm_match(partial: intrinsym.Shape, null: intrinsym.Shape) -> np.ndarray:
+    """(N_partial,) int64: pyFM's map of every partial vertex to a null vertex (WKS, ZoomOut 20 -> 100)."""
+    from pyFM.functional import FunctionalMapping
+    from pyFM.mesh import TriMesh
+
+    # pyFM's point-to-point map goes from its second mesh to its first
+    model = FunctionalMapping(
+        TriMesh(np.asarray(null.vertices), np.asarray(null.faces)),
+        TriMesh(np.asarray(partial.vertices), np.asarray(partial.faces)),
+    )
+    model.preprocess(n_descr=100, descr_type="WKS", subsample_step=5, k_process=100, verbose=False)
+    model.fit(K=(20, 20), w_descr=1.0, w_lap=1e-2, w_dcomm=1e-1, w_orient=0.0, verbose=False)
+    model.zoomout_refine(nit=16, step=5, verbose=False)
+    return np.asarray(model.get_p2p(), dtype=np.int64)
+
+
+def mode_masses(result: intrinsym.Result, true: np.ndarray, mirror: np.ndarray, graph) -> tuple[np.ndarray, np.ndarray]:
+    """Per source sample, the first-pass marginal mass within :data:`MODE_RADIUS` of its
+    true and of its mirror point.
+
+    Parameters
+    ----------
+    result : Result
+    true, mirror : (N_partial,) int64
+        Null vertex of every partial vertex's true and mirror point.
+    graph : (N_null, N_null) sparse
+        The null shape's edge graph in units of sqrt(area(null)).
+
+    Returns
+    -------
+    pair of (S,) float64
+    """
+    src = result.source_point_vertex
+    points = np.unique(np.r_[true[src], mirror[src]])
+    dist = dijkstra(graph, indices=points, limit=MODE_RADIUS)
+    row = {p: k for k, p in enumerate(points)}
+    m = np.asarray(result.marginals, dtype=np.float64)
+    m = m / m.sum(axis=1, keepdims=True)
+    near = np.isfinite(dist[:, result.target_point_vertex])
+
+    def mass(at: np.ndarray) -> np.ndarray:
+        return np.array([m[s, near[row[at[v]]]].sum() for s, v in enumerate(src)])
+
+    return mass(true), mass(mirror)
+
+
+def run(path: Path, method: str, overrides: Mapping) -> dict:
+    """One shape matched to its null shape under ``method`` ("intrinsym" or "pyfm")."""
+    shape = intrinsym.load(path)
+    null = intrinsym.load(partial_truth.null_shape_path(path))
+    n = len(shape.vertices)
+    base = path.with_suffix("")
+    unit = float(np.sqrt(surface_area(null)))
+    tree = cKDTree(null.vertices)
+    true = tree.query(partial_truth.load_barycentric(f"{base}.baryc_gt", null, n))[1]
+    mirror = tree.query(partial_truth.load_barycentric(f"{base}.baryc_gt_sym", null, n))[1]
+    graph = partial_truth.edge_graph(null, unit)
+    row: dict = {"shape": path.stem, "method": method, "vertices": n}
+    start = time.perf_counter()
+    if method == "pyfm":
+        vmap = pyfm_match(shape, null)
+        row["seconds"] = time.perf_counter() - start
+    else:
+        result = intrinsym.match(shape, null, intrinsym.make_params(**overrides))
+        row["seconds"] = time.perf_counter() - start
+        vmap = result.symmetry_map()
+        two = modes.two_modes(result)
+        row["confidence0"], row["confidence1"] = (float(c) for c in two.confidence)
+        row["mode0_true_010"] = float(np.mean(evaluate.map_errors(two.maps[0], true, graph) <= 0.10))
+        row["mode1_mirror_010"] = float(np.mean(evaluate.map_errors(two.maps[1], mirror, graph) <= 0.10))
+        src = result.source_point_vertex
+        far = evaluate.map_errors(true[src], mirror[src], graph) > FAR
+        at_true, at_mirror = (m[far] >= MODE_MASS for m in mode_masses(result, true, mirror, graph))
+        row["far_samples"] = int(far.sum())
+        row["both_modes"] = float(np.mean(at_true & at_mirror)) if far.any() else None
+        row["true_only"] = float(np.mean(at_true & ~at_mirror)) if far.any() else None
+        row["mirror_only"] = float(np.mean(~at_true & at_mirror)) if far.any() else None
+    errors = np.minimum(evaluate.map_errors(vmap, true, graph), evaluate.map_errors(vmap, mirror, graph))
+    for t in THRESHOLDS:
+        row[f"within_{round(t * 100):03d}"] = float(np.mean(errors <= t))
+    mapped = np.isfinite(errors)
+    row["coverage"] = float(mapped.mean())
+    row["mean_error"] = float(errors[mapped].mean()) if mapped.any() else None
+    return row
+
+
+def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:
+    """The table: a row per shape, then mean and worst per kind, per class and overall."""
+    columns = [(key, m) for key, _, have in SCORES for m in methods if m in have]
+    labels = {key: label for key, label, _ in SCORES}
+    head = ["shape", *(f"{labels[key]} ({m})" for key, m in columns)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
+    def cells(members: list[str], worst: bool) -> list[str]:
+        out = []
+        for key, m in columns:
+            values = np.array([_value(rows.get((n, m)), key) for n in members])
+            # worst: the lowest share, the highest error or time
+            agg = np.nanmax if key in ("mean_error", "seconds") else np.nanmin
+            out.append("–" if np.all(np.isnan(values)) else f"{(agg if worst else np.nanmean)(values):.3f}")
+        return out
+
+    for n in names:
+        lines.append("| " + " | ".join([n, *cells([n], False)]) + " |")
+    groups: dict[str, list[str]] = {}
+    for n in names:
+        kind, cls, _, _ = n.split("_")
+        for g in (kind, cls, f"{kind} {cls}", "all"):
+            groups.setdefault(g, []).append(n)
+    for g, members in groups.items():
+        if len(members) > 1:
+            lines.append("| " + " | ".join([f"**mean {g}** ({len(members)})", *cells(members, False)]) + " |")
+            lines.append("| " + " | ".join([f"worst {g}", *cells(members, True)]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_script(argv, __doc__, ["intrinsym"], run, markdown, "within_010", cache_folder="match")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
