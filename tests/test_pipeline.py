@@ -11,9 +11,12 @@ import intrinsym
 from conftest import shared
 from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
 from intrinsym.distortion import local_distortion
+from intrinsym.errors import ResultError
 from intrinsym.params import MAP_MARGIN
+from intrinsym.runinfo import FORMAT_VERSION
 from intrinsym.shape import Shape, surface_area
 from intrinsym.support import Support
+from intrinsym.symmetry import Extraction
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
 
@@ -62,7 +65,10 @@ def test_result_contract(spot, spot_result, tmp_path):
     with np.load(out / "result.npz") as z:
         # one shape: its input vertices are stored once, as source_mesh_vertices
         assert sorted(z.files) == sorted(
-            intrinsym.Result.ARRAYS + Support.KEYS + ("source_mesh_vertices", "zoomout_map", "map_distortion")
+            intrinsym.Result.ARRAYS
+            + Support.KEYS
+            + Extraction.KEYS
+            + ("source_mesh_vertices", "zoomout_map", "map_distortion")
         )
     assert (out / "symmetry_mass.npy").is_file()
     # every symmetry as a vertex map, the dominant one's row the symmetry map; its coverage listed
@@ -71,7 +77,7 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert np.array_equal(maps[r.extraction.dominant_index], np.load(out / "symmetry_map.npy"))
     assert [e["coverage"] for e in listed] == pytest.approx(list((maps >= 0).mean(axis=1)), abs=1e-6)
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
-    assert json.loads((out / "run.json").read_text())["format_version"] == 3
+    assert json.loads((out / "run.json").read_text())["format_version"] == FORMAT_VERSION
 
 
 def test_a_format_2_folder_loads_without_its_involution(spot_result, tmp_path):
@@ -89,6 +95,75 @@ def test_a_format_2_folder_loads_without_its_involution(spot_result, tmp_path):
     assert again.params == spot_result.params
     assert again.info.identity.reflection is None and again.info.identity.weight == spot_result.info.identity.weight
     assert np.array_equal(again.marginals, spot_result.marginals)
+
+
+def _same(a, b) -> bool:
+    """Whether two answers are equal: arrays in dtype, shape and values (NaN equal to NaN),
+    dataclasses and objects field by field, containers item by item."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        nan = a.dtype.kind in "fc"
+        return a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b, equal_nan=nan)
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, float):
+        return a == b or (np.isnan(a) and np.isnan(b))
+    if dataclasses.is_dataclass(a) or hasattr(a, "__dict__"):
+        names = [f.name for f in dataclasses.fields(a)] if dataclasses.is_dataclass(a) else list(vars(a))
+        return all(_same(getattr(a, name), getattr(b, name)) for name in names)
+    return a == b
+
+
+def test_a_saved_result_answers_every_question_as_the_run_did(spot_result, tmp_path):
+    # Result.load(r.save(OUT)) answers every property and method as r: the extraction
+    # (symmetries, global index, parameters) is stored, not rerun
+    r = spot_result
+    again = intrinsym.Result.load(r.save(tmp_path / "out"))
+    public = {name for name in dir(intrinsym.Result) if not name.startswith("_")}
+    asked = set()
+    for field in dataclasses.fields(intrinsym.Result):
+        assert _same(getattr(r, field.name), getattr(again, field.name)), field.name
+        asked.add(field.name)
+    for name in sorted(public - asked - {"load", "save", "to_trimesh"}):
+        value = getattr(r, name)
+        if callable(value):
+            assert _same(value(), getattr(again, name)()), name
+        else:  # a property or a class constant
+            assert _same(value, getattr(again, name)), name
+    assert again.global_symmetry is not None and again.global_confidence() is not None
+    assert repr(again) == repr(r) and again._repr_html_() == r._repr_html_()
+    meshes = r.to_trimesh("confidence"), again.to_trimesh("confidence")
+    assert _same(*(np.asarray(m.vertices) for m in meshes))
+    assert _same(*(np.asarray(m.visual.vertex_colors) for m in meshes))
+    # saved again, the loaded result writes the same files
+    twice = again.save(tmp_path / "twice")
+    for name in intrinsym.Result.FILES:
+        first, second = tmp_path / "out" / name, twice / name
+        assert first.is_file() == second.is_file(), name
+        if name.endswith(".json") and first.is_file():
+            assert json.loads(first.read_text()) == json.loads(second.read_text()), name
+        elif name.endswith(".npy") and first.is_file():
+            assert _same(np.load(first), np.load(second)), name
+    with np.load(tmp_path / "out" / "result.npz") as z, np.load(twice / "result.npz") as w:
+        assert z.files == w.files and all(_same(z[k], w[k]) for k in z.files)
+    # an extraction that does not fit the samples is refused in one line
+    with np.load(twice / "result.npz") as z:
+        kept = {k: z[k] for k in z.files if k not in Extraction.KEYS}
+        stored = {k: z[k] for k in Extraction.KEYS}
+    np.savez(twice / "result.npz", **kept, **{**stored, "global_index": np.array(len(stored["symmetry_size"]))})
+    with pytest.raises(ResultError, match="global_index do not fit"):
+        intrinsym.Result.load(twice)
+    # a folder of format version 3 holds no extraction: it loads without one
+    np.savez(twice / "result.npz", **kept)
+    run = json.loads((twice / "run.json").read_text())
+    del run["extraction_params"]
+    (twice / "run.json").write_text(json.dumps({**run, "format_version": 3}))
+    old = intrinsym.Result.load(twice)
+    assert old.extraction is None and old.global_symmetry is None and _same(old.marginals, r.marginals)
 
 
 def test_global_map_is_spots_reflection(spot, spot_result):

@@ -299,8 +299,12 @@ class Result:
         return f"<b>intrinsym.Result</b> {html.escape(self.summary_line())}"
 
     def run_json(self) -> dict[str, Any]:
-        """``run.json``'s content: the parameters and :class:`RunInfo`."""
-        return {"params": dataclasses.asdict(self.params), **self.info.to_dict()}
+        """``run.json``'s content: the parameters, :class:`RunInfo` and, with an extraction,
+        its parameters (``extraction_params``)."""
+        run = {"params": dataclasses.asdict(self.params), **self.info.to_dict()}
+        if self.extraction is not None:
+            run["extraction_params"] = dataclasses.asdict(self.extraction.params)
+        return run
 
     def save(self, out_dir: str | os.PathLike, derived: Mapping[str, Writer] | None = None) -> Path:
         """Write ``out_dir/result.npz`` and ``out_dir/run.json``, and with an extraction
@@ -317,6 +321,8 @@ class Result:
         arrays = {name: getattr(self, name) for name in self.ARRAYS}
         if self.support is not None:
             arrays.update(self.support.to_arrays())
+        if self.extraction is not None:
+            arrays.update(self.extraction.to_arrays())
         if self.zoomout_map is not None:
             arrays["zoomout_map"] = np.asarray(self.zoomout_map, dtype=np.int64)
         if self.pass_marginals is not None:
@@ -358,8 +364,9 @@ class Result:
 
     @classmethod
     def load(cls, out_dir: str | os.PathLike) -> Result:
-        """Read a result folder written by :meth:`save` (format version 1 or 2). The
-        extraction is not stored; rerun it with :func:`intrinsym.pipeline.extract_result`.
+        """Read a result folder written by :meth:`save`: it answers every method as the
+        result saved did. Folders of the older format versions (1 to 3) hold no extraction
+        (``extraction`` None); rerun it with :func:`intrinsym.pipeline.extract_result`.
 
         Raises
         ------
@@ -387,6 +394,13 @@ class Result:
                 if missing:
                     raise ResultError(f"{name}: lacks {', '.join(missing)}")
                 support = Support.from_arrays(z) if Support.stored_in(z.files) else None
+                extraction = (
+                    Extraction.from_arrays(
+                        z, ExtractParams(**run["extraction_params"]), info.sizes.source, info.sizes.target
+                    )
+                    if Extraction.stored_in(z.files)
+                    else None
+                )
                 zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
                 map_distortion = get("map_distortion")
         except _UNREADABLE as err:
@@ -397,6 +411,7 @@ class Result:
             params=params,
             info=info,
             support=support,
+            extraction=extraction,
             zoomout_map=zoomout_map,
             pass_marginals=pass_marginals,
             map_distortion=map_distortion,
@@ -407,7 +422,7 @@ def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
     """The shape of every array ``result.npz`` holds (under its current and its version 1
     name), in the sizes of ``run.json``; a letter stands for a size it does not record,
     the same in every array: N and M the input vertices of the source and the target
-    shape, P the BP passes after the first."""
+    shape, P the BP passes after the first, K the symmetries and Q their sample pairs."""
     s, t, e, d = sizes.source, sizes.target, sizes.edges, sizes.target_distance_entries
     shapes: dict[str, tuple[int | str, ...]] = {
         "source_points": (s, 3),
@@ -430,6 +445,13 @@ def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
         "self_match": (),
         "source_mesh_vertices": ("N", 3),
         "target_mesh_vertices": ("M", 3),
+        "symmetry_source": ("Q",),
+        "symmetry_target": ("Q",),
+        "symmetry_size": ("K",),
+        "symmetry_score": ("K",),
+        "symmetry_consistency": ("K",),
+        "symmetry_kind": ("K",),
+        "global_index": (),
     }
     renamed = {**V1_ARRAYS, **Support.OLD_KEYS}
     return shapes | {renamed[key]: shape for key, shape in shapes.items() if key in renamed}

@@ -2,13 +2,15 @@
 
 :class:`ExtractParams` configures :mod:`intrinsym.extract`; a :class:`Symmetry` is one
 symmetric part pair (source samples -> target samples); an :class:`Extraction` holds the
-ranked symmetries of a result and which one is global. Lengths are in units of
-sqrt(surface area).
+ranked symmetries of a result and which one is global (stored in ``result.npz`` as
+:attr:`Extraction.KEYS`). Lengths are in units of sqrt(surface area).
 """
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -142,6 +144,72 @@ class Extraction:
     symmetries: list[Symmetry]
     global_index: int
     params: ExtractParams
+
+    #: The arrays of :meth:`to_arrays` (``result.npz``, format version 4; the parameters
+    #: are ``run.json``'s ``extraction_params``).
+    KEYS: ClassVar[tuple[str, ...]] = (
+        "symmetry_source",
+        "symmetry_target",
+        "symmetry_size",
+        "symmetry_score",
+        "symmetry_consistency",
+        "symmetry_kind",
+        "global_index",
+    )
+    #: The values of :attr:`Symmetry.kind`.
+    KINDS: ClassVar[tuple[str, ...]] = ("identity", "partial", "global")
+
+    @classmethod
+    def stored_in(cls, names: Collection[str]) -> bool:
+        """Whether ``names`` (a ``result.npz``'s arrays) hold an extraction."""
+        return set(cls.KEYS) <= set(names)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The symmetries as arrays, in rank order: every part's source and target samples
+        concatenated (int64), ``symmetry_size`` the pairs of each, its score, consistency
+        and kind; and ``global_index`` (0-d)."""
+        syms = self.symmetries
+        return {
+            "symmetry_source": np.concatenate([np.empty(0, np.int64), *(s.source for s in syms)]).astype(np.int64),
+            "symmetry_target": np.concatenate([np.empty(0, np.int64), *(s.target for s in syms)]).astype(np.int64),
+            "symmetry_size": np.array([len(s.source) for s in syms], dtype=np.int64),
+            "symmetry_score": np.array([s.score for s in syms], dtype=np.float64),
+            "symmetry_consistency": np.array([s.consistency for s in syms], dtype=np.float64),
+            "symmetry_kind": np.array([s.kind for s in syms], dtype=f"U{max(map(len, self.KINDS))}"),
+            "global_index": np.array(self.global_index, dtype=np.int64),
+        }
+
+    @classmethod
+    def from_arrays(
+        cls, arrays: Mapping[str, np.ndarray], params: ExtractParams, n_source: int, n_target: int
+    ) -> Extraction:
+        """The extraction :meth:`to_arrays` wrote, of ``n_source`` source and ``n_target``
+        target samples.
+
+        Raises
+        ------
+        ValueError
+            Arrays that do not describe one (sizes that do not add up, a sample or the
+            global index out of range, an unknown kind).
+        """
+        source, target, size = (np.asarray(arrays[key], dtype=np.int64) for key in cls.KEYS[:3])
+        scores, consistencies = (np.asarray(arrays[key], dtype=np.float64) for key in cls.KEYS[3:5])
+        kinds, index = [str(kind) for kind in arrays["symmetry_kind"]], int(arrays["global_index"])
+        problems = [
+            (len(target) != len(source) or size.min(initial=0) < 0 or size.sum() != len(source), "part sizes"),
+            (not len(scores) == len(consistencies) == len(kinds) == len(size), "symmetry counts"),
+            (source.min(initial=0) < 0 or source.max(initial=-1) >= n_source, "source samples"),
+            (target.min(initial=0) < 0 or target.max(initial=-1) >= n_target, "target samples"),
+            (not -1 <= index < len(size), "global_index"),
+            (not set(kinds) <= set(cls.KINDS), "symmetry kinds"),
+        ]
+        bad = [name for wrong, name in problems if wrong]
+        if bad:
+            raise ValueError(f"its extraction's {', '.join(bad)} do not fit")
+        cuts = np.cumsum(size)[:-1]
+        parts = zip(np.split(source, cuts), np.split(target, cuts), scores, consistencies, kinds)
+        symmetries = [Symmetry(s, t, float(score), float(c), kind) for s, t, score, c, kind in parts]
+        return cls(symmetries if len(size) else [], index, params)
 
     @property
     def global_symmetry(self) -> Symmetry | None:
