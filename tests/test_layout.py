@@ -123,3 +123,11 @@ def test_a_core_install_detects_and_names_each_missing_extra_in_one_line(tmp_pat
         assert (done.returncode, done.stdout) == (2, ""), argv
         assert done.stderr == f"intrinsym: error: {what} needs the [{extra}] extra: pip install 'intrinsym[{extra}]'\n"
     assert not (tmp_path / "again").exists()
+    # evaluate is core: its scores without the curve, which needs [viz]
+    import numpy as np
+
+    np.save(tmp_path / "truth.npy", np.arange(len(np.load(tmp_path / "spot" / "symmetry_map.npy"))))
+    done = run("evaluate", "spot", "--symmetry-map", "truth.npy")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "spot" / "scores.json").is_file() and not (tmp_path / "spot" / "curve.png").exists()
+    assert "no curve.png: it needs the [viz] extra" in done.stderr

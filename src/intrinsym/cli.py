@@ -457,7 +457,8 @@ def _run(args: argparse.Namespace) -> int:
         seed=args.seed,
         confidence=evaluate.load_confidence(conf_path, n) if has_map and conf_path.is_file() else None,
     )
-    if maps is not None and available("viz"):
+    curve = maps is not None and available("viz")
+    if maps is not None and curve:
         evaluate.plot_curve(maps, out / "curve.png")
     elif maps is not None:
         print("intrinsym: no curve.png: it needs the [viz] extra: pip install 'intrinsym[viz]'", file=sys.stderr)
@@ -479,7 +480,8 @@ def _run(args: argparse.Namespace) -> int:
             print(
                 f"global map (shares of the vertices): within 0.05 sqrt(area) {m['within_0.05']:.3f}  within 0.10 "
                 f"{m['within_0.10']:.3f}  (of the area {m['area_within_0.05']:.3f} / {m['area_within_0.10']:.3f})  "
-                f"mean error {m['mean_error']:.4f} sqrt(area)  coverage {m['coverage']:.3f}  (curve.png)"
+                f"mean error {m['mean_error']:.4f} sqrt(area)  coverage {m['coverage']:.3f}"
+                + ("  (curve.png)" if curve else "")
             )
             for label, value in m["segmentation"].items():
                 print(f"segmentation part {label}: {100 * value:.1f}%")
