@@ -41,6 +41,11 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert a.graph.max() == pytest.approx(b.graph.max(), rel=0.5)  # edges of one mesh, one unit
     a, b = prepare_pair(half, whole, 0, "each")
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
+    # "auto": a part in the common unit, two wholes each to unit area
+    a, b = prepare_pair(half, whole, 0, "auto")
+    assert surface_area(a.shape) == pytest.approx(ratio)
+    a, b = prepare_pair(whole, from_arrays(whole.vertices * 1.005, whole.faces), 0, "auto")
+    assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
 def test_half_of_spot_matches_spot_within_005():
@@ -53,16 +58,16 @@ def test_half_of_spot_matches_spot_within_005():
     graph = geodesics.surface_graph(spot.vertices / unit, spot.faces)
     mirror = cKDTree(spot.vertices).query(spot.vertices[used] * [-1.0, 1.0, 1.0])[1]
     right = {}
-    # "larger" (the default) takes partial_unary for the part by itself; "each" sees two
-    # unit areas and is given the same unary
-    for scale, unary in (("larger", None), ("each", "spin")):
+    # the default ("auto") takes the common unit and partial_unary for the part by itself;
+    # "each" sees two unit areas and is given the same unary
+    for scale, unary in (("auto", None), ("each", "spin")):
         p = intrinsym.make_params(n_source=150, n_target=1500, match_scale=scale, **({"unary": unary} if unary else {}))
         result = intrinsym.match(half, spot, p)
         assert result.params.unary == "spin"
         found = result.symmetry_map()
         error = np.minimum(evaluate.map_errors(found, used, graph), evaluate.map_errors(found, mirror, graph))
         right[scale] = np.mean(error <= 0.05)
-    assert right["larger"] >= 0.8
+    assert right["auto"] >= 0.8
     assert right["each"] <= 0.3
 
 

@@ -24,14 +24,14 @@ Backend = Literal["auto", "cpu", "gpu"]
 DType = Literal["float32", "float64"]
 Potential = Literal["calibrated", "paper"]
 Calibration = Literal["local", "both", "offset", "descriptor"]
-MatchScale = Literal["larger", "each"]
+MatchScale = Literal["auto", "larger", "each"]
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
 UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
-#: ``match`` uses ``partial_unary`` when the smaller shape's area is below this share of
-#: the larger's (in the common unit of ``match_scale="larger"``): posed frames of one
-#: object keep their area within a few per cent, a SHREC'16 partial shape keeps 0.12-0.93
-#: of it (measured in docs/results.md).
+#: ``match`` takes the smaller shape for a part of the larger (``match_scale="auto"``: one
+#: common unit; ``partial_unary``) when its area is below this share of the larger's:
+#: posed frames of one object keep their area within a few per cent (Sumner's horse
+#: frames 0.977-1), a SHREC'16 partial shape keeps 0.12-0.93 of it (docs/results.md).
 PARTIAL_AREA = 0.95
 #: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity.
 NO_PARTNER_WEIGHT = 0.7
@@ -155,10 +155,11 @@ class Params:
     target_spacing: float | None = _p(None, "Poisson-disc radius of Pt, instead of a count", "sampling", unit=AREA)
     seed: int = _p(0, "random seed of the sampling and the BP orders", "sampling")
     match_scale: MatchScale = _p(
-        "larger",
-        "common unit of length of the two shapes: 'larger' divides both by sqrt(area) of the larger one, "
-        "keeping their relative size (inputs in the same units: a part matched to a whole); 'each' "
-        "normalises each to unit area (the same object in different units)",
+        "auto",
+        "unit of length of the two shapes: 'larger' divides both by sqrt(area) of the larger one, keeping "
+        "their relative size (inputs in the same units: a part matched to a whole); 'each' normalises each "
+        "to unit area (whole shapes, whatever their units); 'auto': 'larger' when the smaller has less than "
+        f"{PARTIAL_AREA} of the larger's area, else 'each' (give 'each' for a part in other units)",
         "sampling",
         flag="--scale",
         match_only=True,

@@ -555,12 +555,12 @@ def match(
 ) -> Result:
     """Marginals of the two-shape MRF: source samples on A, target labels on B.
 
-    Both shapes are measured in one unit, sqrt(area) of the larger
-    (``params.match_scale="larger"``), so that a part matched to a whole keeps its size;
-    ``"each"`` normalises each to unit area, for one object in different units.
-    When the smaller has less than ``PARTIAL_AREA`` of the larger's area, the unary is
-    ``params.partial_unary`` (the result's ``params.unary`` says which ran): a part's
-    Laplace-Beltrami spectrum, and so its WKS, is not the whole's.
+    When the smaller shape has less than ``PARTIAL_AREA`` of the larger's area it is taken
+    for a part of it: both are measured in one unit, sqrt(area) of the larger, so that
+    the part keeps its size, and the unary is ``params.partial_unary`` (the result's
+    ``params.unary`` says which ran; a part's Laplace-Beltrami spectrum, and so its WKS,
+    is not the whole's). Otherwise each is normalised to unit area, so near-isometric
+    frames of one object match whatever their units (``params.match_scale`` decides).
     Parameters as in :func:`detect`; the trivial match does not apply.
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)

@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from . import geodesics, io, sampling
 from .errors import InputError, ParameterError
-from .params import MatchScale
+from .params import PARTIAL_AREA, MatchScale
 from .shape import Shape, clean, from_arrays, surface_area, vertex_normals
 
 #: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, an (N, 3)
@@ -117,13 +117,18 @@ def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tu
     a, b : Shape
     min_vertices : int
         As in :func:`prepare`.
-    scale : {"larger", "each"}
+    scale : {"auto", "larger", "each"}
         "larger": both in units of sqrt(area) of the larger one, so that a part keeps
         its size relative to the whole (each prepared alone would be blown up to unit
         area, and every geodesic distance the pairwise term compares with the other
-        shape's would be off by sqrt(area ratio)); "each": each to unit area.
+        shape's would be off by sqrt(area ratio)); "each": each to unit area; "auto":
+        "larger" when the smaller has less than ``PARTIAL_AREA`` of the larger's area,
+        else "each".
     """
     first, second = prepare(a, min_vertices), prepare(b, min_vertices)
+    if scale == "auto":
+        ratio = (min(first.scale, second.scale) / max(first.scale, second.scale)) ** 2
+        scale = "larger" if ratio < PARTIAL_AREA else "each"
     if scale == "each":
         return first, second
     unit = max(first.scale, second.scale)
