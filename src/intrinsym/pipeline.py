@@ -22,7 +22,7 @@ import numpy as np
 from . import bp, geodesics, model, resources, sampling, unary
 from .errors import ParameterError
 from .extract import Extraction, consistency, extract_from_support
-from .globalmap import GlobalMap, choose_global_map, local_map_distortion
+from .globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
 from .params import (
     NO_PARTNER_WEIGHT,
     OFFSET_TARGETS,
@@ -359,6 +359,7 @@ def _global_map(
         device=outcome.runs[0].backend,  # the GPU that ran BP runs the dense searches
     )
     map_distortion = local_map_distortion(src, chosen.vertex_map)
+    chosen = dataclasses.replace(chosen, vertex_map=supported_map(chosen.vertex_map, src.input_vertices, src.scale))
     clock.lap("global_map")
     return extraction, chosen, map_distortion
 
