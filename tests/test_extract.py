@@ -30,6 +30,7 @@ from intrinsym.extract import (
 )
 from intrinsym.geodesics import SparseDistances
 from intrinsym.support import SourceGraph, Support
+from intrinsym.symmetry import with_inverse
 from intrinsym.vertex_maps import fitted_vertex_map, vertex_map
 
 T, S = 40, 10
@@ -163,6 +164,18 @@ def test_the_dominant_symmetry_is_the_global_one_else_the_widest_partial():
     assert Extraction([identity, a, b, same], -1, params).dominant_index == 2  # the best ranked of equals
     assert Extraction([identity], -1, params).dominant_symmetry is None
     assert Extraction([], -1, params).dominant_index == -1
+
+
+def test_with_inverse_covers_the_other_side_of_a_one_sided_part():
+    # samples on a line at x = 0..9 and targets at the same places; the part sends 0, 1, 2
+    # to 9, 8, 7: its inverse sends 7, 8, 9 back (the nearest image decides), and 5 stays out
+    points = np.column_stack([np.arange(10.0), np.zeros(10), np.zeros(10)])
+    part = Symmetry(np.array([0, 1, 2]), np.array([9, 8, 7]), 0.3, 1.0, "partial")
+    both = with_inverse(part, points, points, 0.5)
+    assert both.source.tolist() == [0, 1, 2, 7, 8, 9] and both.target.tolist() == [9, 8, 7, 2, 1, 0]
+    assert (both.score, both.kind) == (0.3, "partial")
+    # images farther than the radius from every sample add nothing
+    assert with_inverse(part, points, points + [0.0, 1.0, 0.0], 0.5).source.tolist() == [0, 1, 2]
 
 
 def test_extract_partial_symmetry_is_not_global():

@@ -30,6 +30,7 @@ from .modes import two_modes
 from .params import Params
 from .runinfo import RunInfo, Sizes, stored_params
 from .support import Support
+from .symmetry import with_inverse
 from .vertex_maps import fitted_vertex_map
 
 #: What reading a truncated or corrupt result file raises.
@@ -186,7 +187,12 @@ class Result:
         Needs ``support`` and ``extraction``."""
         if self.support is None or self.extraction is None:
             raise ValueError("the result has no extraction")
-        return self._fitted_map(self.extraction.dominant_index)
+        sym = self.extraction.dominant_symmetry
+        if sym is not None and sym.kind == "partial" and self.support.self_match and len(self.edges):
+            # a partial symmetry holds one side's pairs; its map covers the other side too
+            length = np.linalg.norm(np.diff(self.source_points[self.edges], axis=1)[:, 0], axis=1)
+            sym = with_inverse(sym, self.source_points, self.target_points, 0.5 * float(np.median(length)))
+        return self._fitted_map(sym)
 
     def symmetry_maps(self) -> np.ndarray:
         """(K, N_in) int64: the image of every input vertex under each of the K symmetries
@@ -196,17 +202,17 @@ class Result:
             raise ValueError("the result has no extraction")
         dominant = self.extraction.dominant_index
         rows = [
-            self.symmetry_map() if k == dominant else self._fitted_map(k)
-            for k in range(len(self.extraction.symmetries))
+            self.symmetry_map() if k == dominant else self._fitted_map(sym)
+            for k, sym in enumerate(self.extraction.symmetries)
         ]
         return np.stack(rows) if rows else np.empty((0, len(self.support.vertex_source)), dtype=np.int64)
 
-    def _fitted_map(self, index: int) -> np.ndarray:
+    def _fitted_map(self, sym: Symmetry | None) -> np.ndarray:
         assert self.support is not None and self.extraction is not None
-        if index < 0:
+        if sym is None:
             return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
         return fitted_vertex_map(
-            self.extraction.symmetries[index],
+            sym,
             self.support,
             self.edges,
             self.source_points,

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 __all__ = ["Extraction", "ExtractParams", "Symmetry"]
 
@@ -231,3 +232,34 @@ class Extraction:
     def dominant_symmetry(self) -> Symmetry | None:
         """The dominant symmetry (:attr:`dominant_index`), None when there is none."""
         return self.symmetries[self.dominant_index] if self.dominant_index >= 0 else None
+
+
+def with_inverse(symmetry: Symmetry, source_points: np.ndarray, target_points: np.ndarray, radius: float) -> Symmetry:
+    """A self-matching symmetry joined with its inverse: each source sample off the part
+    that lies within ``radius`` of one of the part's images maps to (the target nearest)
+    that image's source sample.
+
+    A partial symmetry grown from one side's seeds holds the pairs from that side to the
+    other (left leg -> right leg); a reflection sends the other side back as well, and a
+    map of the symmetry covers both. Where several images lie near one sample, the
+    nearest decides.
+
+    Parameters
+    ----------
+    symmetry : Symmetry
+    source_points, target_points : (S, 3), (T, 3) float
+        Sample positions in one frame (self-matching: the same shape).
+    radius : float
+        In the units of the positions: about half the source sample spacing.
+    """
+    n = len(source_points)
+    image = symmetry.image(n)
+    distance, nearest = cKDTree(source_points).query(target_points[symmetry.target])
+    own = cKDTree(target_points).query(source_points[symmetry.source])[1]
+    order = np.argsort(distance, kind="stable")[::-1]  # the nearest written last wins
+    for k in order:
+        if distance[k] <= radius and image[nearest[k]] < 0:
+            image[nearest[k]] = -2 - own[k]
+    image = np.where(image <= -2, -2 - image, image)
+    source = np.flatnonzero(image >= 0)
+    return Symmetry(source, image[source], symmetry.score, symmetry.consistency, symmetry.kind)
