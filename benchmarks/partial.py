@@ -11,10 +11,11 @@ self-map (PyPI ``pyfmaps``: WKS, ``fit(w_orient=1, orient_reversing=True)``, Zoo
 20 -> 100), which maps every vertex. Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/partial.py --data DATA [--cache DIR --tag TAG]
-        [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [-o TABLE.md]
+        [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [--cached] [-o TABLE.md]
 
 ``DATA`` holds ``shrec16_partial/`` (default ``$INTRINSYM_DATA``; skipped, exit 0, when
-absent). ``--shapes`` takes shape names (``cuts_cat_shape_1``) or prefixes (``cuts``,
+absent). ``--cached`` computes nothing and tabulates the shapes already in the cache.
+``--shapes`` takes shape names (``cuts_cat_shape_1``) or prefixes (``cuts``,
 ``holes_dog``). ``--cache DIR`` keeps one JSON file per shape and method
 (``DIR/<shape>.<method>.json``), reused when its tag, version and parameters match, so
 an interrupted run resumes; pyFM's rows are kept across tags. ``--jobs N`` runs N shapes
@@ -41,7 +42,7 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import partial_truth, records
+from intrinsym import confidence, partial_truth, records
 from tosca import _clean_floats, _machine, _overrides
 
 #: Cache-format revision: a file with another one is recomputed.
@@ -117,9 +118,22 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         parts = best_parts(result, len(vmap))
         iou = 0.0 if parts is None else partial_truth.part_iou(parts, truth)
         row["coverage"] = float((vmap >= 0).mean())
+        row["confidence"] = confidence_row(result.symmetry_confidence(), vmap, shape, truth)
     row["seconds"] = time.perf_counter() - start
     row.update(partial_truth.score_partial(vmap, shape, truth).as_dict(), iou=iou)
     return row
+
+
+def confidence_row(conf: np.ndarray, vmap: np.ndarray, shape: intrinsym.Shape, truth) -> dict:
+    """The confidence's calibration over the scored vertices with an image: right when
+    partnered and within 0.05 (a vertex without a partner has no right image)."""
+    errors = np.full(len(vmap), np.inf)
+    errors[truth.partnered] = partial_truth.score_partial(vmap, shape, truth).errors
+    scored = (vmap >= 0) & (truth.partner != partial_truth.NOT_SCORED)
+    if not scored.any():
+        return {"ece": None, "mean": None, "n": 0}
+    ece, _ = confidence.calibration(conf[scored], errors[scored] <= 0.05)
+    return {"ece": ece, "mean": float(conf[scored].mean()), "n": int(scored.sum())}
 
 
 def _cache_file(cache: Path, path: Path, method: str) -> Path:
@@ -199,9 +213,10 @@ def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[
         lines.append("| " + " | ".join([n, *cells([n], np.nanmean)]) + " |")
     groups: dict[str, list[str]] = {}
     for n in names:
-        kind, cls = _group(n)
-        for g in (kind, cls, f"{kind} {cls}", "all"):
-            groups.setdefault(g, []).append(n)
+        groups.setdefault(_group(n)[0], []).append(n)
+    for n in names:
+        groups.setdefault(_group(n)[1], []).append(n)
+    groups["all"] = list(names)
     for g, members in groups.items():
         if len(members) > 1:
             lines.append("| " + " | ".join([f"**mean {g}** ({len(members)})", *cells(members, np.nanmean)]) + " |")
@@ -232,6 +247,7 @@ def run_script(
     parser.add_argument("--tag", help="code tag recorded in (and required of) the cached results")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="a Params field changed")
     parser.add_argument("--no-pyfm", action="store_true", help="leave out the pyFM baseline")
+    parser.add_argument("--cached", action="store_true", help="compute nothing: the table of the cached shapes")
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown table here")
     args = parser.parse_args(argv)
     if args.jobs < 1:
@@ -257,6 +273,9 @@ def run_script(
                 rows[path.stem, method] = row
             else:
                 pending.append((path, method, key))
+    if args.cached:
+        done_shapes = {name for name, method in rows if method == "intrinsym"}
+        todo, pending = [p for p in todo if p.stem in done_shapes], []
     start = time.perf_counter()
 
     def done(row: dict) -> None:
