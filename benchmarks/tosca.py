@@ -84,7 +84,7 @@ import numpy as np
 
 import intrinsym
 from intrinsym import confidence, distortion, evaluate, geodesics, params, spectral
-from intrinsym.params import RETURN_RADIUS
+from intrinsym.reflection import RETURN_RADIUS
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
 REFLECTION = {

@@ -42,13 +42,7 @@ from . import distortion, neighbours, spectral
 from .confidence import DISAGREEMENT_RANGE, INVOLUTIVE_SHARE, disagreement, kept_mass, mass_within
 from .extract import Symmetry
 from .params import (
-    CARRY_SAMPLES,
-    CELL_RADIUS,
-    GUIDE_TOLERANCE,
     MAP_MARGIN,
-    REFINE_REACH,
-    REFINE_TOLERANCE,
-    SMOOTH_POINTS,
     Params,
 )
 from .refine import consistent_anchors, spectral_descent, trilaterate
@@ -57,6 +51,35 @@ from .surface import Surface
 from .vertex_maps import carried_to_components, fitted_vertex_map
 
 __all__ = ["GlobalMap", "carried_map", "choose_global_map"]
+
+#: :func:`supported_map` drops the image of a vertex whose round trip is at least this
+#: long (sqrt(area) units): twice ``DISAGREEMENT_RANGE``, so that the image or the image's
+#: image is off by 0.10 at least. On complete TOSCA poses a right image's round trip
+#: reaches 0.136 (cat1's tail tip, on the mirror plane); at 0.10, 0.9 % of cat1's
+#: vertices, 0.7 % right within 0.10, lost their image (docs/results.md).
+SUPPORT_TRIP = 2 * DISAGREEMENT_RANGE
+
+
+#: Radius (sqrt(area) units) of the marginal mass that chooses, per source sample's cell,
+#: between seeded ZoomOut's plain and involutive fits (:func:`intrinsym.globalmap.zoomout_map`).
+CELL_RADIUS = 0.05
+#: The involutive ZoomOut fit's image of a vertex is kept only within this distance (sqrt(area) units) of
+#: the extraction's image; beyond it, the plain fit's (:func:`intrinsym.globalmap.zoomout_map`).
+GUIDE_TOLERANCE = 0.05
+#: A vertex whose global-map image keeps its geodesic distances to the anchors of ``refine_anchors``
+#: within this many target spacings (root mean square, and to the nearest anchor) keeps it
+#: (:func:`intrinsym.refine.trilaterate`; measured in docs/results.md).
+REFINE_TOLERANCE = 2.0
+#: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
+REFINE_REACH = 0.3
+#: ``smooth_map`` fits its functional map only with at least this many mapped input
+#: vertices per eigenfunction; a coarser input keeps its map
+#: (:func:`intrinsym.globalmap.smoothed_map`).
+SMOOTH_POINTS = 4
+#: A connected component with fewer source samples than this is carried by the rigid
+#: motion of the surface around it rather than mapped by the model: two sample pairs do
+#: not fix its orientation (:func:`intrinsym.globalmap.carried_map`).
+CARRY_SAMPLES = 3
 
 
 @dataclass(frozen=True)
@@ -366,16 +389,15 @@ def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) ->
 
 def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) -> np.ndarray:
     """The dominant symmetry's map with -1 where it has no support: a reflection that does
-    not return a vertex to within ``DISAGREEMENT_RANGE`` of itself.
+    not return a vertex to within ``SUPPORT_TRIP`` of itself.
 
     On an incomplete shape, the vertices whose partner is missing still get an image
     (ZoomOut and the refinement map every vertex; a partial symmetry's part can reach past
     its partner), on the partner side's remains; that image's own image is its true
     partner, far from the vertex. A vertex whose round trip is that long has its image or
-    its image's image off by half of it at least, so the map is not the symmetry there
-    (its confidence is at its floor, :func:`intrinsym.confidence.score`). A map that
-    returns fewer than ``INVOLUTIVE_SHARE`` of the vertices it maps is no reflection (a
-    rotation of higher order) and keeps every image.
+    its image's image off by half of it, ``DISAGREEMENT_RANGE``, at least: the map is not
+    the symmetry there. A map that returns fewer than ``INVOLUTIVE_SHARE`` of the vertices
+    it maps is no reflection (a rotation of higher order) and keeps every image.
 
     Parameters
     ----------
@@ -392,7 +414,7 @@ def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) ->
     mapped = image >= 0
     if not mapped.any() or np.mean(trip[mapped] < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
         return image
-    return np.where(trip >= DISAGREEMENT_RANGE, -1, image)
+    return np.where(trip >= SUPPORT_TRIP, -1, image)
 
 
 def local_map_distortion(surface: Surface, vertex_map: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ from typing import Any, Literal, get_args, get_origin
 from .errors import ParameterError
 from .extract import ExtractParams
 from .laplacian import FINE_PER_COARSE
+from .reflection import RETURN_RADIUS
 
 Schedule = Literal["auto", "colour", "serial", "residual", "flooding"]
 Backend = Literal["auto", "cpu", "gpu"]
@@ -35,49 +36,17 @@ UNARY_TERMS = ("spin", "spin-multi", "wks", "hks")
 PARTIAL_AREA = 0.95
 #: The trivial match's weight when ``trivial_weight="auto"`` keeps the identity.
 NO_PARTNER_WEIGHT = 0.7
-#: A round trip through BP's argmax "returns" within this distance (sqrt(area) units) of
-#: its start, for ``reflection_threshold`` (:func:`intrinsym.reflection.returns`).
-RETURN_RADIUS = 0.1
 #: The global map is seeded ZoomOut's (vertex-precise) unless it keeps this much less
 #: marginal mass (within ``mass_radius``) than the extraction's map (resolved to the
 #: sample spacing); a spectral candidate replaces the model's map only when it keeps this
 #: much more (:func:`intrinsym.globalmap.choose_global_map`; measured in docs/results.md).
 MAP_MARGIN = 0.1
-#: Radius (sqrt(area) units) of the marginal mass that chooses, per source sample's cell,
-#: between seeded ZoomOut's plain and involutive fits (:func:`intrinsym.globalmap.zoomout_map`).
-CELL_RADIUS = 0.05
-#: The involutive ZoomOut fit's image of a vertex is kept only within this distance (sqrt(area) units) of
-#: the extraction's image; beyond it, the plain fit's (:func:`intrinsym.globalmap.zoomout_map`).
-GUIDE_TOLERANCE = 0.05
-#: A vertex whose global-map image keeps its geodesic distances to the anchors of ``refine_anchors``
-#: within this many target spacings (root mean square, and to the nearest anchor) keeps it
-#: (:func:`intrinsym.refine.trilaterate`; measured in docs/results.md).
-REFINE_TOLERANCE = 2.0
-#: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
-REFINE_REACH = 0.3
-#: ``smooth_map`` fits its functional map only with at least this many mapped input
-#: vertices per eigenfunction; a coarser input keeps its map
-#: (:func:`intrinsym.globalmap.smoothed_map`).
-SMOOTH_POINTS = 4
-#: A connected component with fewer source samples than this is carried by the rigid
-#: motion of the surface around it rather than mapped by the model: two sample pairs do
-#: not fix its orientation (:func:`intrinsym.globalmap.carried_map`).
-CARRY_SAMPLES = 3
-#: A carried component moves as the mapped vertices within this distance of it do
-#: (sqrt(area) units, beyond its own radius): about the default sample spacing, a patch
-#: around it curved enough to fix the motion
-#: (:func:`intrinsym.vertex_maps.carried_to_components`).
-CARRY_REACH = 0.05
-#: ... and at least this many of them (the nearest).
-CARRY_MIN = 20
 #: A mesh with fewer vertices than this many times the larger sample count is
 #: midpoint-subdivided (each round quadruples it) until it has that many: the working
 #: shape the samples, geodesics and descriptors live on (measured in docs/benchmarks.md).
 WORK_PER_SAMPLE = 2
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
-#: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
-SPIN_SCALES = (0.5, 1.0, 2.0)
 
 #: Largest accepted ``eigenpairs`` and ``zoomout_final``: the eigensolver's time grows
 #: steeply with it, and the WKS and ZoomOut use far fewer.

@@ -27,13 +27,12 @@ from .params import (
     NO_PARTNER_WEIGHT,
     OFFSET_TARGETS,
     PARTIAL_AREA,
-    RETURN_RADIUS,
     WORK_PER_SAMPLE,
     Params,
     make_params,
 )
 from .progress import BPIteration, ProgressCallback, StageDone
-from .reflection import reflection
+from .reflection import RETURN_RADIUS, reflection
 from .result import Result
 from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
 from .shape import surface_area

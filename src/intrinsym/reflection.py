@@ -29,6 +29,11 @@ __all__ = ["MIN_SINE", "reflection", "returns", "reversed_turns"]
 MIN_SINE = 0.2
 
 
+#: A round trip through BP's argmax "returns" within this distance (sqrt(area) units) of
+#: its start, for ``reflection_threshold`` (:func:`intrinsym.reflection.returns`).
+RETURN_RADIUS = 0.1
+
+
 def returns(image: np.ndarray, source_points: np.ndarray, target_points: np.ndarray, radius: float) -> np.ndarray:
     """Which source samples a map returns to: ``T(T(s))`` near ``s``.
 

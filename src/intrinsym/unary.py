@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from . import descriptors, geodesics, laplacian, sampling
-from .params import OFFSET_TARGETS, SPIN_SCALES, Params
+from .params import OFFSET_TARGETS, Params
 from .surface import Surface, sample
 
 #: Laplace-Beltrami eigenvalues (K,) and eigenfunctions (N, K) of a surface.
@@ -25,6 +25,10 @@ Spectrum = tuple[np.ndarray, np.ndarray]
 #: sigma**2 in :func:`calibrated_potential` stays positive (a constant descriptor, as on
 #: a thin needle, has scale 0, and 0 / 0 would make the potentials NaN).
 SMALLEST_SCALE = float(np.sqrt(np.finfo(np.float64).tiny))
+
+
+#: Support radii of the multi-scale spin image, in multiples of ``spin_radius``.
+SPIN_SCALES = (0.5, 1.0, 2.0)
 
 
 def nmi_potential(similarity: np.ndarray, gamma: float) -> np.ndarray:

@@ -12,8 +12,15 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .extract import ExtractParams, Symmetry
-from .params import CARRY_MIN, CARRY_REACH
 from .support import SourceGraph, Support
+
+#: A carried component moves as the mapped vertices within this distance of it do
+#: (sqrt(area) units, beyond its own radius): about the default sample spacing, a patch
+#: around it curved enough to fix the motion
+#: (:func:`intrinsym.vertex_maps.carried_to_components`).
+CARRY_REACH = 0.05
+#: ... and at least this many of them (the nearest).
+CARRY_MIN = 20
 
 
 def vertex_map(symmetry: Symmetry, vertex_source: np.ndarray, target_vertex: np.ndarray, n_source: int) -> np.ndarray:
