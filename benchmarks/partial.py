@@ -94,10 +94,7 @@ def best_parts(result: intrinsym.Result, n: int) -> np.ndarray | None:
     best = records.records(
         result.extraction.symmetries[:1], result.source_point_vertex, result.target_point_vertex, result.support
     )[0]
-    mask = np.zeros(n, dtype=bool)
-    for part in records.part_vertices(best):
-        mask[part] = True
-    return mask
+    return records.part_mask(best, n)
 
 
 def run(path: Path, method: str, overrides: Mapping) -> dict:
@@ -106,7 +103,7 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     row: dict = {"shape": path.stem, "method": method, "vertices": len(shape.vertices)}
     row["partnered_share"] = float(truth.partnered.mean())
     start = time.perf_counter()
-    iou = float("nan")
+    iou, result = float("nan"), None
     if method == "none":
         vmap = np.full(len(shape.vertices), -1, dtype=np.int64)
     elif method == "pyfm":
@@ -115,20 +112,25 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     else:
         result = intrinsym.detect(shape, intrinsym.make_params(**overrides))
         vmap = result.symmetry_map()
+    row["seconds"] = time.perf_counter() - start
+    scores = partial_truth.score_partial(vmap, shape, truth)
+    if result is not None:
         parts = best_parts(result, len(vmap))
         iou = 0.0 if parts is None else partial_truth.part_iou(parts, truth)
         row["coverage"] = float((vmap >= 0).mean())
-        row["confidence"] = confidence_row(result.symmetry_confidence(), vmap, shape, truth)
-    row["seconds"] = time.perf_counter() - start
-    row.update(partial_truth.score_partial(vmap, shape, truth).as_dict(), iou=iou)
+        row["confidence"] = confidence_row(result.symmetry_confidence(), vmap, truth, scores)
+    row.update(scores.as_dict(), iou=iou)
     return row
 
 
-def confidence_row(conf: np.ndarray, vmap: np.ndarray, shape: intrinsym.Shape, truth) -> dict:
+def confidence_row(
+    conf: np.ndarray, vmap: np.ndarray, truth: partial_truth.PartialTruth, scores: partial_truth.PartialMapScores
+) -> dict:
     """The confidence's calibration over the scored vertices with an image: right when
-    partnered and within 0.05 (a vertex without a partner has no right image)."""
+    partnered and within 0.05 of the partner (``scores``; a vertex without a partner has
+    no right image)."""
     errors = np.full(len(vmap), np.inf)
-    errors[truth.partnered] = partial_truth.score_partial(vmap, shape, truth).errors
+    errors[truth.partnered] = scores.errors
     scored = (vmap >= 0) & (truth.partner != partial_truth.NOT_SCORED)
     if not scored.any():
         return {"ece": None, "mean": None, "n": 0}

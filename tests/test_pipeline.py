@@ -129,12 +129,14 @@ def test_a_saved_result_answers_every_question_as_the_run_did(spot_result, tmp_p
     for field in dataclasses.fields(intrinsym.Result):
         assert _same(getattr(r, field.name), getattr(again, field.name)), field.name
         asked.add(field.name)
-    for name in sorted(public - asked - {"load", "save", "to_trimesh"}):
+    for name in sorted(public - asked - {"load", "save", "to_trimesh", "fitted_map"}):
         value = getattr(r, name)
         if callable(value):
             assert _same(value(), getattr(again, name)()), name
         else:  # a property or a class constant
             assert _same(value, getattr(again, name)), name
+    for sym, stored in zip(r.extraction.symmetries, again.extraction.symmetries, strict=True):
+        assert _same(r.fitted_map(sym), again.fitted_map(stored))
     assert again.global_symmetry is not None and again.global_confidence() is not None
     assert repr(again) == repr(r) and again._repr_html_() == r._repr_html_()
     meshes = r.to_trimesh("confidence"), again.to_trimesh("confidence")

@@ -41,7 +41,7 @@ from .errors import InputError, IntrinsymError, ParameterError
 from .extras import available, require
 from .io import load
 from .progress import BPIteration, ProgressEvent, next_stage
-from .records import part_vertices, records
+from .records import part_mask, records
 from .result import Result, saved_global_confidence
 
 
@@ -513,12 +513,7 @@ def _run(args: argparse.Namespace) -> int:
 def _best_parts(out: Path, n: int) -> np.ndarray | None:
     """(n,) bool: the input vertices of the best-ranked symmetry's two parts; None without one."""
     found = viz.load_symmetries(out)
-    if not found:
-        return None
-    mask = np.zeros(n, dtype=bool)
-    for part in part_vertices(found[0]):
-        mask[part] = True
-    return mask
+    return part_mask(found[0], n) if found else None
 
 
 def _query(args: argparse.Namespace, result: Result, out: Path) -> int:

@@ -22,7 +22,6 @@ import numpy as np
 from .extract import consistency, normalise_rows
 from .support import SourceGraph
 from .symmetry import Symmetry
-from .vertex_maps import fitted_vertex_map
 
 if TYPE_CHECKING:
     from .result import Result
@@ -132,24 +131,9 @@ def two_modes(result: Result) -> Modes:
             break
     if second is None:
         second = _away(result, first)
-    maps = np.stack([result.symmetry_map(), _vertex_map(result, second)])
+    source = np.flatnonzero(second >= 0)
+    maps = np.stack([result.symmetry_map(), result.fitted_map(Symmetry(source, second[source], 0.0, 1.0, "partial"))])
     quality = np.array([_quality(result, first, graph), _quality(result, second, graph)])
     total = quality.sum()
     confidence = quality / total if total > 0 else np.array([1.0, 0.0])
     return Modes(maps, np.stack([first, second]), quality, confidence)
-
-
-def _vertex_map(result: Result, image: np.ndarray) -> np.ndarray:
-    """(N_a,) int64: a sample image extended to the input vertices (as the extraction's maps)."""
-    assert result.support is not None and result.extraction is not None
-    source = np.flatnonzero(image >= 0)
-    sym = Symmetry(source, image[source], 0.0, 1.0, "partial")
-    return fitted_vertex_map(
-        sym,
-        result.support,
-        result.edges,
-        result.source_points,
-        result.target_points,
-        result.target_point_vertex,
-        result.extraction.params,
-    )

@@ -74,3 +74,11 @@ def part_vertices(record: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
         values = record[key] if key in record else record[old]
         lists.append(np.asarray(values, dtype=np.int64))
     return lists[0], lists[1]
+
+
+def part_mask(record: Mapping[str, Any], n: int) -> np.ndarray:
+    """(n,) bool: the input vertices of both parts of a ``symmetries.json`` entry."""
+    mask = np.zeros(n, dtype=bool)
+    for part in part_vertices(record):
+        mask[part] = True
+    return mask

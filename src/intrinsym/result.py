@@ -192,7 +192,7 @@ class Result:
             # a partial symmetry holds one side's pairs; its map covers the other side too
             length = np.linalg.norm(np.diff(self.source_points[self.edges], axis=1)[:, 0], axis=1)
             sym = with_inverse(sym, self.source_points, self.target_points, 0.5 * float(np.median(length)))
-        return self._fitted_map(sym)
+        return self.fitted_map(sym)
 
     def symmetry_maps(self) -> np.ndarray:
         """(K, N_in) int64: the image of every input vertex under each of the K symmetries
@@ -202,13 +202,17 @@ class Result:
             raise ValueError("the result has no extraction")
         dominant = self.extraction.dominant_index
         rows = [
-            self.symmetry_map() if k == dominant else self._fitted_map(sym)
+            self.symmetry_map() if k == dominant else self.fitted_map(sym)
             for k, sym in enumerate(self.extraction.symmetries)
         ]
         return np.stack(rows) if rows else np.empty((0, len(self.support.vertex_source)), dtype=np.int64)
 
-    def _fitted_map(self, sym: Symmetry | None) -> np.ndarray:
-        assert self.support is not None and self.extraction is not None
+    def fitted_map(self, sym: Symmetry | None) -> np.ndarray:
+        """(N_in,) int64: the vertex map of a symmetry of this result's samples
+        (:func:`intrinsym.vertex_maps.fitted_vertex_map` with the extraction's parameters),
+        -1 off its parts and everywhere for None. Needs ``support`` and ``extraction``."""
+        if self.support is None or self.extraction is None:
+            raise ValueError("the result has no extraction")
         if sym is None:
             return np.full(len(self.support.vertex_source), -1, dtype=np.int64)
         return fitted_vertex_map(
@@ -351,7 +355,9 @@ class Result:
             listed = records.records(
                 self.extraction.symmetries, self.source_point_vertex, self.target_point_vertex, self.support
             )
-            vmap, maps = self.symmetry_map(), self.symmetry_maps()
+            maps = self.symmetry_maps()
+            dominant = self.extraction.dominant_index
+            vmap = maps[dominant].astype(np.int64) if dominant >= 0 else self.symmetry_map()
             for entry, row in zip(listed, maps):
                 entry["coverage"] = round(float(np.mean(row >= 0)), 6)
             writers["symmetries.json"] = write_json(listed)
