@@ -6,7 +6,8 @@ work. The sweep below varies ``rho``, the truncation of the pairwise term (paper
 a pair of samples may break geodesic consistency before the model stops caring), and prints,
 for every value, what BP did, what was found, and how isometric the found map is (its mean
 local distortion, ``intrinsym.map_distortion``: no ground truth needed). Any other field of
-``intrinsym.Params`` sweeps the same way (``--param trivial_radius --values 0.05 0.08 0.12``).
+``intrinsym.Params`` sweeps the same way (``--param trivial_radius --values 0.05 0.08 0.12``),
+but for the sample counts: they decide how finely the surface is prepared.
 
 Run::
 
@@ -49,7 +50,7 @@ def sweep(mesh: str, name: str, values: list[float], base: intrinsym.Params) -> 
         local distortion of the map, and the seconds ``detect`` took.
     """
     shape = intrinsym.load(mesh)
-    surface = intrinsym.prepare(shape)  # cleaned, unit area, geodesic graph: done once
+    surface = intrinsym.prepare(shape, base)  # cleaned, unit area, geodesic graph: done once
     rows = []
     for value in values:
         params = dataclasses.replace(base, **{name: value})
@@ -99,6 +100,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
     fields = {f.name for f in dataclasses.fields(intrinsym.Params)}
     if args.param not in fields:
         parser.error(f"--param {args.param}: not a field of intrinsym.Params")
+    if args.param in ("n_source", "n_target", "source_spacing", "target_spacing"):
+        parser.error(f"--param {args.param}: the sample counts decide the prepared surface")
     values = args.values or ([0.3, 0.4] if args.small else [0.2, 0.4, 0.6])
     base = intrinsym.Params(**SMALL) if args.small else intrinsym.Params()
     rows = sweep(args.mesh, args.param, values, base)
