@@ -6,12 +6,12 @@ with a global map holds histograms of the symmetry map's per-vertex score
 its marginal mass alone (``symmetry_mass``), :data:`tosca.MASS_BINS` equal-width bins,
 with, per bin, how many vertices map within 0.05 of their true image; ``score_split``
 holds the score's bins once per bin of the global map's local distortion
-(``Result.map_distortion``, :data:`intrinsym.confidence.DISTORTION_BINS`). From the
+(``Result.map_distortion``, :data:`intrinsym.globalmap.confidence.DISTORTION_BINS`). From the
 ``--feature`` chosen (default ``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
    0.05" on the bin centres, weighted by the vertex counts, one per group of bins; these
-   values are the tables of :data:`intrinsym.confidence.CALIBRATION` (the script says
+   values are the tables of :data:`intrinsym.globalmap.confidence.CALIBRATION` (the script says
    whether the package's copy is the fit, and prints the fit to paste when it is not);
 2. checks it leaving one class out: for each class, the fit on the other classes is
    applied to that class's vertices; the table gives the expected calibration error (10
@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import isotonic_regression
 
-from intrinsym import confidence
+from intrinsym.globalmap import confidence
 
 #: Equal-width confidence bins of the expected calibration error.
 ECE_BINS = 10
@@ -181,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     shipped = np.concatenate(confidence.CALIBRATION)
     same = values.shape == shipped.shape and np.allclose(values, shipped, atol=5e-4)
     tables = np.split(values, len(values) // len(confidence.CALIBRATION[0]))
-    text += f"\nFit on all {len(rows)} shapes ({'equal to' if same else 'differs from'} intrinsym.confidence's):\n\n"
+    same_text = "equal to" if same else "differs from"
+    text += f"\nFit on all {len(rows)} shapes ({same_text} intrinsym.globalmap.confidence's):\n\n"
     text += "CALIBRATION = (\n" + "".join(f"    ({', '.join(f'{v:.3f}' for v in t)}),\n" for t in tables) + ")\n"
     print(text)
     if args.out:

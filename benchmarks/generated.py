@@ -1,10 +1,10 @@
 """End-to-end recovery of the generated shapes' known symmetries.
 
 Runs the public pipeline (:func:`intrinsym.detect` / :func:`intrinsym.match`) on the
-shapes of :mod:`intrinsym.shapes` and checks these criteria:
+shapes of :mod:`intrinsym.mesh.generated` and checks these criteria:
 
 1. cuboctahedron: from the source sample nearest each of the 12 vertices, the peaks of
-   its marginal and the images of it under the parts :func:`intrinsym.extract.query`
+   its marginal and the images of it under the parts :func:`intrinsym.extract.extract.query`
    grows land within ``RADIUS`` of each of the 11 other vertices (paper Fig. 8d);
 2. star (5 arms, self-matching) and lantern (4 arms, frame A matched to frame B): every
    arm is mapped onto every other arm (and, in two-shape mode, onto itself) by an
@@ -17,7 +17,7 @@ shapes of :mod:`intrinsym.shapes` and checks these criteria:
 4. the partial shape (two identical limbs on an asymmetric body), at the
    library's default sizes on three seeds: the limb points' marginals peak on the other
    limb, the off-limb points' on nothing (median peak mass,
-   :func:`intrinsym.evaluate.partial_scores`), and no global symmetry is extracted.
+   :func:`intrinsym.evaluation.evaluate.partial_scores`), and no global symmetry is extracted.
 
 The symmetric shapes run several BP passes (``PASSES``; each further pass finds
 another mode of the posterior, see ``intrinsym.Params.passes``), the others the
@@ -56,9 +56,15 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import confidence, evaluate, extract, geodesics, laplacian, pipeline, shapes, spectral
-from intrinsym.shape import from_arrays, surface_area
-from intrinsym.vertex_maps import fitted_vertex_map
+from intrinsym import pipeline
+from intrinsym.evaluation import evaluate
+from intrinsym.extract import extract
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap import confidence
+from intrinsym.globalmap.vertex_maps import fitted_vertex_map
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import from_arrays, surface_area
+from intrinsym.spectral import laplacian, spectral
 
 #: A peak or image "lands on" a vertex when it lies within this geodesic distance of it
 #: (the cuboctahedron's edge is 0.325; the nearest source sample may lie ~0.04 away).
@@ -151,7 +157,7 @@ def corner_recovery(result: intrinsym.Result, shape: shapes.GeneratedShape) -> t
     peaks, parts : (12,) float64
         For the source sample nearest each vertex: the share of the 11 other vertices
         within ``RADIUS`` of a peak of its marginal, and of an image of it under the
-        non-identity parts of its :func:`intrinsym.extract.query`.
+        non-identity parts of its :func:`intrinsym.extract.extract.query`.
     """
     v = shape.vertices
     corners = np.flatnonzero(np.isclose(np.sort(np.abs(v), axis=1), [0.0, 1.0, 1.0]).all(axis=1))
@@ -203,9 +209,9 @@ def vertex_maps(
     """Every extracted symmetry extended to the input vertices.
 
     One that covers at least ``global_fraction`` of the source samples by seeded ZoomOut
-    from its sample pairs (:func:`intrinsym.spectral.seeded_symmetry`, as
+    from its sample pairs (:func:`intrinsym.spectral.spectral.seeded_symmetry`, as
     ``symmetry_map.npy`` is made, in two-shape mode from ``source`` into ``target``), the
-    others by :func:`intrinsym.vertex_maps.fitted_vertex_map`.
+    others by :func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`.
     """
     params = result.extraction_params()
     evecs = laplacian.eigenpairs(source.vertices, source.faces, EIGENPAIRS)[1]
@@ -261,7 +267,7 @@ def check_arms(
 def check_segmentation(
     report: Report, name: str, result: intrinsym.Result, source: shapes.GeneratedShape, target: shapes.GeneratedShape
 ) -> None:
-    """The paper's segmentation scores (:func:`intrinsym.evaluate.segmentation_scores`)
+    """The paper's segmentation scores (:func:`intrinsym.evaluation.evaluate.segmentation_scores`)
     of the extracted symmetry that best realises a ground-truth map, the best pair by
     mean score over the parts, scored against that map; and how many of the ground-truth
     maps some symmetry realises with every part at least ``SEGMENTATION``. Every

@@ -40,15 +40,19 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import _extract_kernels as kernels
-from intrinsym import evaluate, geodesics, shapes, unary
-from intrinsym.confidence import calibration, map_mass, mass_within, sample_images
-from intrinsym.extract import Symmetry, consistency
-from intrinsym.globalmap import best_spectral, cell_mass, choose, zoomout_map
+from intrinsym.evaluation import evaluate
+from intrinsym.extract import _kernels as kernels
+from intrinsym.extract.extract import consistency
+from intrinsym.extract.support import SourceGraph
+from intrinsym.extract.symmetry import Symmetry
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap.confidence import calibration, map_mass, mass_within, sample_images
+from intrinsym.globalmap.globalmap import best_spectral, cell_mass, choose, zoomout_map
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import Shape, clean, surface_area
 from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
-from intrinsym.shape import Shape, clean, surface_area
-from intrinsym.support import SourceGraph
 from intrinsym.surface import prepare
+from intrinsym.unary import unary
 from tosca import cases
 
 CANDIDATES = ("extraction", "zoomout", "spectral")

@@ -3,7 +3,7 @@
 For every mesh, runs :func:`intrinsym.detect` at the given sizes to build its MRF (the
 unary BP ran on, the source graph, the target rings), then runs BP on that one MRF with
 the colour schedule (the default on the GPU) and the flooding schedule, each on the CPU and on the
-GPU (:mod:`intrinsym.bp.gpu`), each to convergence, and prints seconds per iteration
+GPU (:mod:`intrinsym.mrf.bp.gpu`), each to convergence, and prints seconds per iteration
 (median), iterations, seconds to convergence, and how far the GPU's marginals lie from
 the CPU's of the same schedule (the same messages: largest relative difference, and the
 share of rows whose argmax agrees)::
@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 import intrinsym
-from intrinsym import bp, model
+from intrinsym.mrf import bp, model
 
 #: Largest relative difference of the GPU's marginals from the CPU's
 #: (float32 messages both, float64 products; tests/test_bp.py asserts 1e-4 on a small MRF).

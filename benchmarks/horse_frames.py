@@ -2,14 +2,14 @@
 
 The frames of ``sumner_horse/`` of the data folder share the connectivity of the reference pose
 ``horse_ref``, which is posed mirror-symmetrically: its best reflection
-(:func:`intrinsym.evaluate.extrinsic_mirror`), carried through the shared vertex
+(:func:`intrinsym.evaluation.evaluate.extrinsic_mirror`), carried through the shared vertex
 indices, is every frame's ground-truth left/right map. For each mesh this prints
 
 - how far that map is from an isometry of the mesh: the change of geodesic distance
   |d(x, y) - d(m(x), m(y))| over ``PAIRS`` random vertices x and every vertex y,
   median and 90th percentile (for comparison, the same of TOSCA's posed shapes with
   their symmetry files, when ``tosca_sym`` is present);
-- the global map of the spectral baseline (:func:`intrinsym.spectral.spectral_symmetry`)
+- the global map of the spectral baseline (:func:`intrinsym.spectral.spectral.spectral_symmetry`)
   and of ``intrinsym.detect`` at the defaults and with the trivial match removed
   (``trivial_weight=0``), scored as ``intrinsym evaluate`` scores (within 0.05 and 0.10
   of sqrt(area), geodesic, and the mean error)::
@@ -29,8 +29,10 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import evaluate, geodesics, spectral
-from intrinsym.shape import Shape, surface_area
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.mesh.shape import Shape, surface_area
+from intrinsym.spectral import spectral
 
 #: Random vertices x of the geodesic-change measure.
 PAIRS = 60

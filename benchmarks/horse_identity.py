@@ -26,8 +26,9 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import bp, evaluate, model
-from intrinsym.shape import surface_area
+from intrinsym.evaluation import evaluate
+from intrinsym.mesh.shape import surface_area
+from intrinsym.mrf import bp, model
 
 #: Iteration counts after which the argmax is scored (BP stops earlier when it converges).
 CHECKPOINTS = (1, 3, 10, 100)

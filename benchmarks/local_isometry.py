@@ -2,7 +2,7 @@
 
 For every shape of ``tosca.py`` (or ``--shapes``), a default ``detect`` saved under
 ``--saved DIR/<shape>`` (run and saved when absent); then the local distortion of its
-global map and of the true symmetry (:func:`intrinsym.distortion.local_distortion`: per
+global map and of the true symmetry (:func:`intrinsym.globalmap.distortion.local_distortion`: per
 vertex, the mean change of the geodesic distances to the vertices within 0.1), averaged
 over the vertices the map misses by more than 0.05 ("misses") and over the others
 ("hits"). Where the truth changes the distances around the misses several times more than
@@ -22,7 +22,9 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import distortion, evaluate, geodesics
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap import distortion
 from tosca import cases, select
 
 

@@ -2,7 +2,7 @@
 
 Runs the default :func:`intrinsym.detect` (seed 0) on every partial shape of
 ``shrec16_partial/{cuts,holes}`` and scores its ``symmetry_map`` with the protocol of
-:mod:`intrinsym.partial_truth` (distances in units of sqrt(area) of the null shape):
+:mod:`intrinsym.evaluation.partial_truth` (distances in units of sqrt(area) of the null shape):
 the partnered share within 0.05 and 0.10, the unpartnered share left unmapped, their
 balance (mean of the first and the third) and the IoU of the best-ranked symmetry's
 parts with the truth's partnered vertices. Beside it, two baselines: "no partner
@@ -42,7 +42,9 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import confidence, partial_truth, records
+from intrinsym.evaluation import partial_truth
+from intrinsym.extract import records
+from intrinsym.globalmap import confidence
 from tosca import _clean_floats, _machine, _overrides
 
 #: Cache-format revision: a file with another one is recomputed.

@@ -2,7 +2,7 @@
 
 For every shape of ``tosca.py`` (or ``--shapes``), a default ``detect`` without the
 refinement (``--refine-anchors 0``), saved under ``--saved DIR/<shape>`` and reused when
-present; then its global map refined by :func:`intrinsym.globalmap.refined_map` at each
+present; then its global map refined by :func:`intrinsym.globalmap.globalmap.refined_map` at each
 number of anchors (``--anchors``) and tolerance in target spacings (``--tolerances``),
 each scored as ``intrinsym evaluate`` scores it (within 0.05 / 0.10 of the true image,
 mean error; geodesic, units of sqrt(area)). Prints one Markdown table: per shape, the map
@@ -30,8 +30,8 @@ import numpy as np
 
 import intrinsym
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import evaluate
-from intrinsym.globalmap import refined_map
+from intrinsym.evaluation import evaluate
+from intrinsym.globalmap.globalmap import refined_map
 from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
 from intrinsym.surface import prepare
 from tosca import cases, select

@@ -31,8 +31,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import intrinsym  # noqa: E402
 from _data import add_data_argument, data_folder, no_data  # noqa: E402
-from intrinsym import evaluate  # noqa: E402
-from intrinsym.shape import Shape, vertex_normals  # noqa: E402
+from intrinsym.evaluation import evaluate  # noqa: E402
+from intrinsym.mesh.shape import Shape, vertex_normals  # noqa: E402
 
 Mesh = tuple[np.ndarray, np.ndarray | None]
 

@@ -18,7 +18,7 @@ the global map (``symmetry_map.npy``) within 0.05 and 0.10 of the true image.
 
 ``--mirror MESH`` (repeatable) adds shapes without a symmetry file, posed
 mirror-symmetrically: their ground truth is their best reflection
-(:func:`intrinsym.evaluate.extrinsic_mirror`), and the row notes its median residual.
+(:func:`intrinsym.evaluation.evaluate.extrinsic_mirror`), and the row notes its median residual.
 """
 
 from __future__ import annotations
@@ -33,12 +33,13 @@ from pathlib import Path
 import numpy as np
 
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import evaluate, pipeline
+from intrinsym import pipeline
 from intrinsym.errors import InputError, ParameterError
+from intrinsym.evaluation import evaluate
 from intrinsym.files import atomic_write
-from intrinsym.io import load
+from intrinsym.mesh.io import load
+from intrinsym.mesh.shape import surface_area
 from intrinsym.params import PRESETS, make_params
-from intrinsym.shape import surface_area
 
 #: The posed TOSCA shapes the unary configurations were compared on.
 SHAPES = ("cat1", "dog1", "horse5", "michael1", "victoria1", "centaur1", "wolf1")
@@ -56,7 +57,7 @@ def score_shape(mesh_path: Path, sym_path: Path | None, config: str, seed: int =
     """Run ``detect`` on one shape and score its unary, its BP marginals and its global map.
 
     ``sym_path`` None: the ground truth is the shape's best reflection
-    (:func:`intrinsym.evaluate.extrinsic_mirror`).
+    (:func:`intrinsym.evaluation.evaluate.extrinsic_mirror`).
 
     Returns
     -------

@@ -3,7 +3,7 @@
 Runs the default :func:`intrinsym.match` (seed 0: the common unit, a part's unary
 ``partial_unary``) of every partial shape of ``shrec16_partial/{cuts,holes}`` to its null
 shape and scores it with the SHREC'16 convention: per vertex of the partial shape, the
-geodesic distance on the null shape (mesh edges, :func:`intrinsym.partial_truth.edge_graph`)
+geodesic distance on the null shape (mesh edges, :func:`intrinsym.evaluation.partial_truth.edge_graph`)
 from the predicted image to the nearer of its true point and its mirror point (each taken
 at its nearest null vertex), in units of sqrt(area(null)); the shares within 0.05, 0.10 and 0.25 and the
 mean (over mapped vertices; an unmapped vertex counts as a miss in the shares).
@@ -12,7 +12,7 @@ Beside it, pyFM from partial to full (PyPI ``pyfmaps``: WKS, ``fit``, ZoomOut 20
 100), and the scores of intrinsym's marginals and modes: per source sample whose true
 and mirror points lie more than 0.10 apart, the share whose first-pass marginal puts
 at least 0.1 of its mass within 0.05 of each ("both modes"), of the true one alone and
-of the mirror one alone; the two maps of :func:`intrinsym.modes.two_modes` (mode 0
+of the mirror one alone; the two maps of :func:`intrinsym.result.modes.two_modes` (mode 0
 within 0.10 of the true point, mode 1 within 0.10 of the mirror, each on its own) and
 their confidences. Command::
 
@@ -40,8 +40,9 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 import intrinsym
-from intrinsym import evaluate, modes, partial_truth
-from intrinsym.shape import surface_area
+from intrinsym.evaluation import evaluate, partial_truth
+from intrinsym.mesh.shape import surface_area
+from intrinsym.result import modes
 from partial import _value, run_script
 
 #: Cache-format revision: a file with another one is recomputed.

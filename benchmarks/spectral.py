@@ -1,9 +1,9 @@
 """The spectral baseline's global map on the TOSCA / KIDS table of docs/results.md.
 
-Runs :func:`intrinsym.spectral.spectral_symmetry` (sign search over Laplace-Beltrami
+Runs :func:`intrinsym.spectral.spectral.spectral_symmetry` (sign search over Laplace-Beltrami
 eigenfunctions, then ZoomOut) on every shape of the "Default settings on TOSCA and KIDS"
 table of docs/results.md and scores its map exactly as that table scores ours
-(:func:`intrinsym.evaluate.score_map`, what ``intrinsym evaluate`` runs: fraction of
+(:func:`intrinsym.evaluation.evaluate.score_map`, what ``intrinsym evaluate`` runs: fraction of
 vertices whose image lies within 0.05 and 0.10 of sqrt(area) of the true mirror image,
 geodesic, and the mean error)::
 
@@ -32,9 +32,10 @@ from pathlib import Path
 import numpy as np
 
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import evaluate, spectral
-from intrinsym.io import load
-from intrinsym.shape import clean
+from intrinsym.evaluation import evaluate
+from intrinsym.mesh.io import load
+from intrinsym.mesh.shape import clean
+from intrinsym.spectral import spectral
 
 #: Shape name -> (mesh, ground-truth map) relative to the data folder, in the table's order.
 SHAPES = {

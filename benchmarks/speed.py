@@ -6,7 +6,7 @@ process (``import intrinsym``, then ``detect(mesh, n_source=..., n_target=...)``
 alternating old and new, and prints one JSON line per run: process wall time, import
 and ``detect`` seconds, seconds per stage, BP iterations and seconds per iteration, peak
 memory, and the marginal scores of unary and BP and the symmetry map's scores
-(:func:`intrinsym.evaluate.score_marginals`, :func:`intrinsym.evaluate.score_map`,
+(:func:`intrinsym.evaluation.evaluate.score_marginals`, :func:`intrinsym.evaluation.evaluate.score_map`,
 computed here by the installed version from what each run saved). Cases: ``spot`` (the
 shipped example; truth: its best reflection), ``cat1``, ``michael1`` (defaults 250 /
 4000) and ``michael1-elephant`` (271 / 12722). Command::
@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import evaluate, example_path, load
+from intrinsym import example_path, load
+from intrinsym.evaluation import evaluate
 
 #: Case name -> (mesh relative to the data folder, or None for the shipped example; |Ps|; |Pt|).
 CASES = {

@@ -1,7 +1,7 @@
 """The paper's Table 1 cases at their sizes, on stand-in meshes of the data folder.
 
 The paper's own meshes are not available, so each case runs on a mesh of the data
-folder at the paper's |Ps| and |Pt| (:func:`intrinsym.bench.run`: the whole ``detect``
+folder at the paper's |Ps| and |Pt| (:func:`intrinsym.app.bench.run`: the whole ``detect``
 in a fresh process per case, then the dense paper-form message against ours)::
 
     python benchmarks/table1.py [--data DIR] [--cases elephant,star] [--iterations 100] [--json]
@@ -18,7 +18,7 @@ import json
 import sys
 
 from _data import add_data_argument, data_folder, no_data
-from intrinsym import bench
+from intrinsym.app import bench
 
 TABLE1 = (
     bench.Case("dragon1", "static/stanford-bunny.obj", 115, 6000, 4.10, 2870.30),

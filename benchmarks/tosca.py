@@ -1,7 +1,7 @@
 """Default detection beside the spectral baseline on every shape with a known symmetry.
 
 Runs the default :func:`intrinsym.detect` (seed 0) and the spectral baseline
-(:func:`intrinsym.spectral.spectral_symmetry`, sign search then ZoomOut, as
+(:func:`intrinsym.spectral.spectral.spectral_symmetry`, sign search then ZoomOut, as
 ``benchmarks/spectral.py`` runs it) on every mesh of the data folder that has a
 ground-truth symmetry:
 
@@ -10,21 +10,21 @@ ground-truth symmetry:
 * ``kids_sym/0001.isometry.1.off`` with ``kids_sym/sym.txt`` (row ``kids``);
 * the meshes posed nearly mirror-symmetrically that have no symmetry file, the SCAPE
   template (``scape``), ``homer``, ``cow`` and ``spot`` (the shipped example): their
-  ground truth is their best reflection (:func:`intrinsym.evaluate.extrinsic_mirror`),
+  ground truth is their best reflection (:func:`intrinsym.evaluation.evaluate.extrinsic_mirror`),
   and the row records that reflection's median residual (units of sqrt(area)).
 
 Per shape it records the marginal scores of the unary and of BP
-(:func:`intrinsym.evaluate.score_marginals`: mirror hit, peak recall, decoy recall,
+(:func:`intrinsym.evaluation.evaluate.score_marginals`: mirror hit, peak recall, decoy recall,
 breadth), the global symmetry map's fraction of vertices within 0.05 and 0.10 of the
-true image and its mean error (:func:`intrinsym.evaluate.score_map`, geodesic, units of
+true image and its mean error (:func:`intrinsym.evaluation.evaluate.score_map`, geodesic, units of
 sqrt(area); what ``intrinsym evaluate`` reports), the same two shares of the surface area
 (each vertex weighed by the area it stands for: a finely meshed hand holds more of the
 vertices than of the area), whether a global symmetry was found,
-the distortion of that map and of the true one (:func:`intrinsym.distortion.map_distortion`:
+the distortion of that map and of the true one (:func:`intrinsym.globalmap.distortion.map_distortion`:
 the share of vertex pairs within 0.5 whose geodesic distance the map changes by more
 than 0.05, which tells how near to an isometry the pose keeps its symmetry),
 where the true symmetry keeps local distances (the vertices whose
-:func:`intrinsym.distortion.local_distortion` is at most ``LOCAL_ISOMETRY``: pairs within
+:func:`intrinsym.globalmap.distortion.local_distortion` is at most ``LOCAL_ISOMETRY``: pairs within
 0.1 changed by at most that on average) and both maps' scores there,
 the global/partial decision and the statistics behind it (the share of source edges
 BP's argmax keeps, the share of source samples it returns to when applied twice, and
@@ -83,8 +83,12 @@ from pathlib import Path
 import numpy as np
 
 import intrinsym
-from intrinsym import confidence, distortion, evaluate, geodesics, params, spectral
-from intrinsym.reflection import RETURN_RADIUS
+from intrinsym import params
+from intrinsym.evaluation import evaluate
+from intrinsym.extract.reflection import RETURN_RADIUS
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap import confidence, distortion
+from intrinsym.spectral import spectral
 
 #: Meshes without a symmetry file that are posed nearly mirror-symmetrically: name -> path.
 REFLECTION = {
@@ -175,8 +179,8 @@ def select(all_cases: list[Case], names: list[str] | None) -> list[Case]:
 
 
 def _shape_module():
-    """The module with ``clean`` and ``surface_area`` (``intrinsym.shape``, else ``intrinsym.mesh``)."""
-    for name in ("intrinsym.shape", "intrinsym.mesh"):
+    """The module with ``clean`` and ``surface_area`` (``intrinsym.mesh.shape``, else ``intrinsym.mesh``)."""
+    for name in ("intrinsym.mesh.shape", "intrinsym.mesh"):
         try:
             module = importlib.import_module(name)
         except ImportError:
@@ -230,9 +234,9 @@ def reliability(result, shape, sym) -> dict | None:
     confidence) and of its marginal mass (``symmetry_mass``): how many vertices fall in it
     and how many of them map within 0.05 / 0.10 of the true image (graph geodesics, units
     of sqrt(area)); keyed ``score`` and ``mass``, each None on code without it. Keyed
-    ``score_split``: the score's bins once per table of ``intrinsym.confidence.CALIBRATION``
+    ``score_split``: the score's bins once per table of ``intrinsym.globalmap.confidence.CALIBRATION``
     (``groups``), each vertex in its table's, by the map's local distortion
-    (``Result.map_distortion``, :func:`intrinsym.confidence.distortion_group`)."""
+    (``Result.map_distortion``, :func:`intrinsym.globalmap.confidence.distortion_group`)."""
     features = {}
     for key in ("score", "mass"):
         of = getattr(result, f"symmetry_{key}", None)

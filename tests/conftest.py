@@ -79,7 +79,7 @@ def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
     Returns the result directory and the (V, 3) vertices.
     """
     from intrinsym import Params, Result
-    from intrinsym.runinfo import BPStats, Resolved, RunInfo, Sizes
+    from intrinsym.result.runinfo import BPStats, Resolved, RunInfo, Sizes
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)

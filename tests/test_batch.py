@@ -28,10 +28,11 @@ import pytest
 
 import intrinsym
 from conftest import shared
-from intrinsym import Params, Result, shapes
-from intrinsym.batching import engine, items
-from intrinsym.batching import rows as batch_rows
-from intrinsym.cli import main
+from intrinsym import Params, Result
+from intrinsym.app.batching import engine, items
+from intrinsym.app.batching import rows as batch_rows
+from intrinsym.app.cli import main
+from intrinsym.mesh import generated as shapes
 
 #: Tiny sizes: every item takes seconds.
 TINY = {"n_source": 20, "n_target": 200, "spin_cloud": 2000, "iterations": 5}

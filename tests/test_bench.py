@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 
-from intrinsym import bench
-from intrinsym.cli import main
+from intrinsym.app import bench
+from intrinsym.app.cli import main
 from test_bp import sphere_problem
 
 

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from intrinsym import params
-from intrinsym.bp import (
+from intrinsym.geodesics.geodesics import SparseDistances
+from intrinsym.mrf.bp import (
     BACKENDS,
     SCHEDULES,
     belief_propagation,
@@ -19,9 +20,9 @@ from intrinsym.bp import (
     resolve_backend,
     resolve_schedule,
 )
-from intrinsym.bp.cpu import weight_polynomial
-from intrinsym.bp.gpu import available as gpu_available
-from intrinsym.bp.schedule import (
+from intrinsym.mrf.bp.cpu import weight_polynomial
+from intrinsym.mrf.bp.gpu import available as gpu_available
+from intrinsym.mrf.bp.schedule import (
     active_steps,
     colour_classes,
     incoming_edges,
@@ -29,8 +30,7 @@ from intrinsym.bp.schedule import (
     serial_orders,
     visiting_orders,
 )
-from intrinsym.geodesics import SparseDistances
-from intrinsym.model import MRF, lambda_for_tolerance, pairwise_dense
+from intrinsym.mrf.model import MRF, lambda_for_tolerance, pairwise_dense
 
 
 def sparse_from_dense(dist: np.ndarray, radius: float) -> SparseDistances:

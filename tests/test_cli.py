@@ -9,14 +9,15 @@ import pytest
 import trimesh
 
 import intrinsym
-from intrinsym import cli, params
+from intrinsym import params
+from intrinsym.app import cli
 
 SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
 
 
 def run(*args):
     return subprocess.run(
-        [sys.executable, "-m", "intrinsym.cli", *map(str, args)], capture_output=True, text=True, timeout=300
+        [sys.executable, "-m", "intrinsym.app.cli", *map(str, args)], capture_output=True, text=True, timeout=300
     )
 
 
@@ -165,7 +166,7 @@ def test_detect_report_identity(tmp_path):
     spot = intrinsym.load(intrinsym.example_path())
     pairs = np.array(identity[0]["pairs"])
     gap = np.linalg.norm(spot.vertices[pairs[:, 0]] - spot.vertices[pairs[:, 1]], axis=1)
-    assert np.median(gap) < 0.05 * np.sqrt(intrinsym.shape.surface_area(spot))
+    assert np.median(gap) < 0.05 * np.sqrt(intrinsym.mesh.shape.surface_area(spot))
     assert json.loads((out / "run.json").read_text())["params"]["report_identity"] is True
     # without the flag the same model lists no identity
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *sizes, "--keep-trivial"]) == 0

@@ -9,7 +9,7 @@ import sys
 import pytest
 from rich.console import Console
 
-from intrinsym import cli, text_tables
+from intrinsym.app import cli, text_tables
 from intrinsym.progress import STAGES, StageDone, next_stage
 
 

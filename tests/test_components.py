@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import descriptors, laplacian, shapes
 from intrinsym.errors import ParameterError
+from intrinsym.mesh import generated as shapes
+from intrinsym.spectral import laplacian
+from intrinsym.unary import descriptors
 
 
 def copies(shape: shapes.GeneratedShape, k: int) -> tuple[np.ndarray, np.ndarray]:

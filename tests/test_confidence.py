@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from intrinsym import confidence
+from intrinsym.globalmap import confidence
 
 
 @pytest.mark.parametrize("group", range(len(confidence.DISTORTION_BINS) + 1))

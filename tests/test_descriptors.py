@@ -6,7 +6,9 @@ import trimesh
 
 from conftest import unit_sphere
 from intrinsym import pipeline
-from intrinsym.descriptors import (
+from intrinsym.mesh.shape import from_arrays
+from intrinsym.spectral.laplacian import eigenpairs
+from intrinsym.unary.descriptors import (
     heat_kernel_signature,
     hks_times,
     nmi,
@@ -15,8 +17,6 @@ from intrinsym.descriptors import (
     wave_kernel_signature,
     wks_energies,
 )
-from intrinsym.laplacian import eigenpairs
-from intrinsym.shape import from_arrays
 
 
 def _grid_plane(n: int = 81, half: float = 1.0) -> np.ndarray:

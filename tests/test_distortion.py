@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import unit_square_grid
-from intrinsym.distortion import local_distortion, map_distortion
-from intrinsym.shape import from_arrays
+from intrinsym.globalmap.distortion import local_distortion, map_distortion
+from intrinsym.mesh.shape import from_arrays
 
 
 def test_map_distortion_against_euclidean_distances():

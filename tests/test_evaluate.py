@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from intrinsym.errors import InputError
-from intrinsym.evaluate import load_confidence, load_symmetry_map, marginal_scores, partial_scores
+from intrinsym.evaluation.evaluate import load_confidence, load_symmetry_map, marginal_scores, partial_scores
 
 
 def test_marginal_scores_by_hand():
@@ -86,7 +86,7 @@ import scipy.sparse as sp  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
-from intrinsym.evaluate import (  # noqa: E402
+from intrinsym.evaluation.evaluate import (  # noqa: E402
     correspondence_curve,
     evaluation_report,
     load_labels,
@@ -95,7 +95,7 @@ from intrinsym.evaluate import (  # noqa: E402
     score_map,
     segmentation_scores,
 )
-from intrinsym.shape import from_arrays  # noqa: E402
+from intrinsym.mesh.shape import from_arrays  # noqa: E402
 
 
 def path_graph(n=5, step=0.1):
@@ -188,7 +188,7 @@ def test_labels_and_missing_entries(tmp_path):
 
 
 def test_partial_ground_truth_scores_only_vertices_with_an_image(mirror):
-    from intrinsym.evaluate import score_marginals
+    from intrinsym.evaluation.evaluate import score_marginals
 
     v, f, sym = mirror
     shape = from_arrays(v, f)
@@ -208,7 +208,7 @@ def test_partial_ground_truth_scores_only_vertices_with_an_image(mirror):
 
 
 def test_extrinsic_mirror_finds_the_reflection_of_a_moved_shuffled_shape(mirror):
-    from intrinsym.evaluate import extrinsic_mirror
+    from intrinsym.evaluation.evaluate import extrinsic_mirror
 
     v, f, sym = mirror
     rng = np.random.default_rng(5)

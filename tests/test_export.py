@@ -12,8 +12,9 @@ from matplotlib.image import imread
 from scipy.spatial import cKDTree
 
 from conftest import mirror_shape, sphere_result
-from intrinsym import cli, coloring, viewer, viz
-from intrinsym.shape import Shape
+from intrinsym.app import cli, viewer, viz
+from intrinsym.mesh.shape import Shape
+from intrinsym.result import coloring
 
 
 def _mirror_map(v: np.ndarray) -> np.ndarray:
@@ -124,7 +125,7 @@ def test_export_errors_are_one_line(tmp_path):
 
 def test_result_to_trimesh_and_a_short_repr(tmp_path):
     import intrinsym
-    from intrinsym import shapes
+    from intrinsym.mesh import generated as shapes
 
     made = shapes.figure(resolution=6)
     assert shapes.save(made, tmp_path / "figure.off")
@@ -142,8 +143,8 @@ def test_result_to_trimesh_and_a_short_repr(tmp_path):
 
 
 def test_show_without_polyscope_says_which_extra(mapped, monkeypatch):
-    from intrinsym import export
     from intrinsym.errors import InputError
+    from intrinsym.result import export
 
     out, _, _ = mapped
     monkeypatch.setitem(sys.modules, "polyscope", None)  # as if not installed
@@ -157,7 +158,7 @@ def test_show_registers_the_colours_in_polyscope(mapped, monkeypatch):
     ps = pytest.importorskip("polyscope", reason="polyscope is not installed (pip install -e .[polyscope])")
     if not os.environ.get("DISPLAY"):
         pytest.skip("polyscope needs a display")
-    from intrinsym import export
+    from intrinsym.result import export
 
     out, _, _ = mapped
     monkeypatch.setattr(ps, "show", lambda: None)

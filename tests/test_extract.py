@@ -12,11 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from intrinsym.confidence import kept_mass, map_mass, mass_within, sample_images
-from intrinsym.extract import (
-    Extraction,
-    ExtractParams,
-    Symmetry,
+from intrinsym.extract.extract import (
     _merge,
     complete,
     consistency,
@@ -28,10 +24,11 @@ from intrinsym.extract import (
     query,
     refine,
 )
-from intrinsym.geodesics import SparseDistances
-from intrinsym.support import SourceGraph, Support
-from intrinsym.symmetry import with_inverse
-from intrinsym.vertex_maps import fitted_vertex_map, vertex_map
+from intrinsym.extract.support import SourceGraph, Support
+from intrinsym.extract.symmetry import Extraction, ExtractParams, Symmetry, with_inverse
+from intrinsym.geodesics.geodesics import SparseDistances
+from intrinsym.globalmap.confidence import kept_mass, map_mass, mass_within, sample_images
+from intrinsym.globalmap.vertex_maps import fitted_vertex_map, vertex_map
 
 T, S = 40, 10
 IDENTITY = 4 * np.arange(S)
@@ -415,8 +412,10 @@ def test_detect_writes_symmetries_and_query_answers_from_disk(tmp_path, capsys):
     import math
     import time
 
-    from intrinsym import Result, cli, shapes
-    from intrinsym.extract import query_from_support
+    from intrinsym import Result
+    from intrinsym.app import cli
+    from intrinsym.extract.extract import query_from_support
+    from intrinsym.mesh import generated as shapes
 
     figure = shapes.figure(resolution=4)
     shapes.save(figure, tmp_path / "fig.off")

@@ -15,10 +15,13 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import evaluate, extract, partial_truth, shapes, vertex_maps
+from intrinsym.evaluation import evaluate, partial_truth
+from intrinsym.extract import extract
+from intrinsym.globalmap import vertex_maps
+from intrinsym.globalmap.vertex_maps import fitted_vertex_map
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import Shape, surface_area
 from intrinsym.params import MAP_MARGIN
-from intrinsym.shape import Shape, surface_area
-from intrinsym.vertex_maps import fitted_vertex_map
 
 SMALL = dict(n_source=60, n_target=600, eigenpairs=40, spin_cloud=10000, iterations=10)
 

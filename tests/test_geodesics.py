@@ -12,7 +12,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from intrinsym.geodesics import (
+from intrinsym.geodesics.geodesics import (
     distances_from,
     distances_to,
     local_distances,
@@ -21,7 +21,7 @@ from intrinsym.geodesics import (
     surface_graph,
     voronoi_adjacency,
 )
-from intrinsym.sampling import area_uniform_points, farthest_point_sampling
+from intrinsym.mesh.sampling import area_uniform_points, farthest_point_sampling
 
 NEAR, FAR = 0.05, 0.3  # tested distance range, units of sqrt(area)
 

@@ -8,9 +8,9 @@ from scipy.spatial import cKDTree
 
 import intrinsym
 from conftest import shared, unit_square_grid
-from intrinsym import evaluate, laplacian, shapes, spectral
-from intrinsym.extract import Symmetry
-from intrinsym.globalmap import (
+from intrinsym.evaluation import evaluate
+from intrinsym.extract.symmetry import Symmetry
+from intrinsym.globalmap.globalmap import (
     GUIDE_TOLERANCE,
     SMOOTH_POINTS,
     local_map_distortion,
@@ -18,7 +18,9 @@ from intrinsym.globalmap import (
     supported_map,
     zoomout_map,
 )
-from intrinsym.shape import from_arrays
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import from_arrays
+from intrinsym.spectral import laplacian, spectral
 from intrinsym.surface import prepare, sample
 
 PARAMS = intrinsym.Params(zoomout_seed=6, zoomout_final=30)

@@ -1,4 +1,4 @@
-"""Tests of intrinsym.io: file formats and the one-line errors for bad files."""
+"""Tests of intrinsym.mesh.io: file formats and the one-line errors for bad files."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import trimesh
 import intrinsym
 from conftest import PYRAMID_F, PYRAMID_V, mirror_shape, shared, sphere_points
 from intrinsym.errors import InputError
-from intrinsym.io import load
-from intrinsym.shape import clean, surface_area
+from intrinsym.mesh.io import load
+from intrinsym.mesh.shape import clean, surface_area
 
 
 def write(tmp_path: Path, name: str, text: str) -> Path:

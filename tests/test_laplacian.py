@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from conftest import unit_sphere
-from intrinsym import laplacian, shapes
-from intrinsym.laplacian import COARSE_EXTRA, COARSE_PER_PAIR, FINE_PER_COARSE, eigenpairs, two_grid_eigenpairs
+from intrinsym.mesh import generated as shapes
+from intrinsym.spectral import laplacian
+from intrinsym.spectral.laplacian import COARSE_EXTRA, COARSE_PER_PAIR, FINE_PER_COARSE, eigenpairs, two_grid_eigenpairs
 
 
 def test_sphere_eigenvalues_are_the_spherical_harmonic_ones():

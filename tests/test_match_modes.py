@@ -9,8 +9,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 import intrinsym
-from intrinsym import evaluate, geodesics, modes, shapes
-from intrinsym.shape import from_arrays, surface_area
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import from_arrays, surface_area
+from intrinsym.result import modes
 from intrinsym.surface import prepare_pair
 
 

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from intrinsym.descriptors import wave_kernel_signature, wks_energies
-from intrinsym.geodesics import SparseDistances
-from intrinsym.laplacian import eigenpairs
-from intrinsym.model import lambda_for_tolerance, pairwise_dense, suppress_peaks, suppress_trivial, truncation_width
-from intrinsym.unary import calibrated_potential, descriptor_scale, nmi_potential, potential_floor, row_scales
+from intrinsym.geodesics.geodesics import SparseDistances
+from intrinsym.mrf.model import lambda_for_tolerance, pairwise_dense, suppress_peaks, suppress_trivial, truncation_width
+from intrinsym.spectral.laplacian import eigenpairs
+from intrinsym.unary.descriptors import wave_kernel_signature, wks_energies
+from intrinsym.unary.unary import calibrated_potential, descriptor_scale, nmi_potential, potential_floor, row_scales
 
 
 def test_nmi_potential_paper_values():

@@ -2,7 +2,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from intrinsym import bp, laplacian, neighbours, shapes
+from intrinsym.mesh import generated as shapes
+from intrinsym.mrf import bp
+from intrinsym.spectral import laplacian, neighbours
 
 
 def _exact(query, basis):

@@ -12,7 +12,9 @@ import pytest
 
 import intrinsym
 from conftest import sphere_result
-from intrinsym import bp, cli, params
+from intrinsym import params
+from intrinsym.app import cli
+from intrinsym.mrf import bp
 from intrinsym.params import Params, describe, make_params
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "parameters.md"

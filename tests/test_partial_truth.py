@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from conftest import shared
-from intrinsym import partial_truth
 from intrinsym.errors import InputError
-from intrinsym.partial_truth import NO_PARTNER, NOT_SCORED, PartialTruth
-from intrinsym.shape import Shape
+from intrinsym.evaluation import partial_truth
+from intrinsym.evaluation.partial_truth import NO_PARTNER, NOT_SCORED, PartialTruth
+from intrinsym.mesh.shape import Shape
 
 # A strip of unit squares along x, two triangles each: vertices (i, 0, 0) = i and (i, 1, 0) = 5 + i.
 _XS = np.arange(5.0)

@@ -9,15 +9,18 @@ import trimesh
 
 import intrinsym
 from conftest import shared
-from intrinsym import bp, confidence, evaluate, pipeline, vertex_maps
-from intrinsym.distortion import local_distortion
+from intrinsym import pipeline
 from intrinsym.errors import ResultError
-from intrinsym.globalmap import supported_map
+from intrinsym.evaluation import evaluate
+from intrinsym.extract.support import Support
+from intrinsym.extract.symmetry import Extraction
+from intrinsym.globalmap import confidence, vertex_maps
+from intrinsym.globalmap.distortion import local_distortion
+from intrinsym.globalmap.globalmap import supported_map
+from intrinsym.mesh.shape import Shape, surface_area
+from intrinsym.mrf import bp
 from intrinsym.params import MAP_MARGIN
-from intrinsym.runinfo import FORMAT_VERSION
-from intrinsym.shape import Shape, surface_area
-from intrinsym.support import Support
-from intrinsym.symmetry import Extraction
+from intrinsym.result.runinfo import FORMAT_VERSION
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
 
@@ -235,6 +238,58 @@ def test_deterministic_for_a_seed(spot, spot_result):
     assert not np.array_equal(other.source_point_vertex, spot_result.source_point_vertex)
 
 
+def _timeless(doc):
+    """A JSON document without its timings (the keys that name seconds)."""
+    if isinstance(doc, dict):
+        return {k: _timeless(v) for k, v in doc.items() if "seconds" not in k}
+    return [_timeless(v) for v in doc] if isinstance(doc, list) else doc
+
+
+def _saved_files(result: intrinsym.Result, folder) -> dict:
+    """Every array and document of a saved result, the run's seconds left out."""
+    out = result.save(folder)
+    files: dict = {}
+    for path in sorted(out.iterdir()):
+        if path.suffix == ".npz":
+            with np.load(path) as z:
+                files.update({f"{path.name}:{k}": z[k] for k in z.files})
+        elif path.suffix == ".npy":
+            files[path.name] = np.load(path)
+        else:
+            files[path.name] = _timeless(json.loads(path.read_text()))
+    return files
+
+
+def test_a_detect_on_a_prepared_surface_is_the_detect_on_the_path(spot_result, tmp_path):
+    # spot_result is the detect on the mesh read from the example's path (what detect reads a path into)
+    p = intrinsym.make_params(**SMALL)
+    surface = intrinsym.prepare(intrinsym.example_path(), p)
+    assert isinstance(surface, intrinsym.Surface) and not surface.subdivided
+    again = intrinsym.detect(surface, p)
+    assert again.info.input == spot_result.info.input == str(intrinsym.example_path())
+    want, got = _saved_files(spot_result, tmp_path / "path"), _saved_files(again, tmp_path / "surface")
+    assert sorted(got) == sorted(want)
+    for name, value in want.items():
+        if isinstance(value, np.ndarray):
+            nan = value.dtype.kind in "fc"
+            assert value.dtype == got[name].dtype and np.array_equal(value, got[name], equal_nan=nan), name
+        else:
+            assert value == got[name], name
+
+
+def test_a_prepared_surface_serves_the_counts_of_its_working_size(spot):
+    # spot has 2930 vertices: counts up to 1465 need no subdivision, the default 4000 targets do
+    small = intrinsym.prepare(spot, n_source=40, n_target=400)
+    assert not small.subdivided and pipeline.serves(small, pipeline._min_vertices(intrinsym.make_params(n_target=1400)))
+    fine = intrinsym.prepare(spot)
+    assert fine.subdivided and len(fine.shape.vertices) >= fine.min_vertices == 8000
+    assert pipeline.serves(fine, 8000) and not pipeline.serves(fine, 800)
+    with pytest.raises(intrinsym.ParameterError, match=r"prepared for a working size of 8000 vertices.*need 800"):
+        intrinsym.detect(fine, intrinsym.make_params(**SMALL))
+    with pytest.raises(intrinsym.ParameterError, match="need 8000"):
+        intrinsym.detect(small)
+
+
 def test_residual_schedule_end_to_end(spot, spot_result):
     res = intrinsym.detect(spot, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
     colour = intrinsym.detect(spot, intrinsym.make_params(schedule="colour", **dict(SMALL, iterations=100)))
@@ -267,7 +322,7 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     # Euclidean distance is a lower bound of the geodesic one: every target this close
     # to its source point lies inside the trivial radius (0.08 sqrt(area); tested at
     # 0.05, where geodesic and Euclidean distance agree on this mesh).
-    area = intrinsym.shape.surface_area(spot)
+    area = intrinsym.mesh.shape.surface_area(spot)
     d = np.linalg.norm(kept.source_points[:, None] - kept.target_points[None], axis=2) / np.sqrt(area)
     inside = d < 0.05
     assert inside.sum() >= len(d)

@@ -12,7 +12,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import intrinsym
-from intrinsym import cli, params, pipeline
+from intrinsym import params, pipeline
+from intrinsym.app import cli
 from intrinsym.errors import IntrinsymError
 
 FAST = settings(

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from intrinsym.runinfo import FORMAT_VERSION
+from intrinsym.result.runinfo import FORMAT_VERSION
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -190,7 +190,7 @@ def test_the_documents_list_commands() -> None:
 @pytest.mark.parametrize(("doc", "command"), DOCUMENTED, ids=[f"{d}: {c}" for d, c in DOCUMENTED])
 def test_every_documented_command_parses(doc: str, command: str, tmp_path: Path) -> None:
     """Every option of every command the README and docs show exists, as written."""
-    from intrinsym import cli
+    from intrinsym.app import cli
 
     argv = as_argv(command, tmp_path)
     try:
@@ -203,7 +203,7 @@ def test_readme_commands_run(tmp_path: Path, capsys: pytest.CaptureFixture) -> N
     """The README's command-line block runs as written (placeholders bound to a generated
     star); match and batch, which need a second shape or a Dask cluster, are run by
     tests/test_cli.py and tests/test_batch.py."""
-    from intrinsym import cli
+    from intrinsym.app import cli
 
     assert cli.main(["generate", "star", "--resolution", "4", "-o", str(tmp_path / "star.off")]) == 0
     ran = []

@@ -7,10 +7,17 @@ import pytest
 from scipy.spatial import cKDTree
 
 import intrinsym
-from intrinsym import evaluate, geodesics
-from intrinsym.globalmap import refined_map
-from intrinsym.refine import _nearest_sources, agreeing_anchors, consistent_anchors, spectral_descent, trilaterate
-from intrinsym.shape import from_arrays
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap.globalmap import refined_map
+from intrinsym.globalmap.refine import (
+    _nearest_sources,
+    agreeing_anchors,
+    consistent_anchors,
+    spectral_descent,
+    trilaterate,
+)
+from intrinsym.mesh.shape import from_arrays
 from intrinsym.surface import prepare, sample
 
 
@@ -231,7 +238,7 @@ def _jittered(surf, sym: np.ndarray, share: float, seed: int = 0) -> np.ndarray:
 
 
 def test_spectral_descent_removes_vertex_noise_from_the_mirror_map(mirror):
-    from intrinsym.laplacian import eigenpairs
+    from intrinsym.spectral.laplacian import eigenpairs
 
     surf, sym, _ = _surface(mirror)
     evals, evecs = eigenpairs(surf.shape.vertices, surf.shape.faces, 60)
@@ -247,7 +254,7 @@ def test_spectral_descent_removes_vertex_noise_from_the_mirror_map(mirror):
 
 
 def test_spectral_descent_ends_at_local_minima_of_the_projection(mirror):
-    from intrinsym.laplacian import eigenpairs
+    from intrinsym.spectral.laplacian import eigenpairs
 
     surf, sym, _ = _surface(mirror)
     _, evecs = eigenpairs(surf.shape.vertices, surf.shape.faces, 20)

@@ -4,8 +4,8 @@ grid and on the bent ellipsoid's exact mirror."""
 import numpy as np
 import trimesh
 
-from intrinsym.reflection import reflection, returns, reversed_turns
-from intrinsym.shape import Shape, vertex_normals
+from intrinsym.extract.reflection import reflection, returns, reversed_turns
+from intrinsym.mesh.shape import Shape, vertex_normals
 
 # a 5 x 5 grid of samples in the plane z = 0, 4-neighbour edges, normals +z
 IJ = np.array([(i, j) for i in range(-2, 3) for j in range(-2, 3)])

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import cli, files, pipeline, resources
+from intrinsym import files, pipeline, resources
+from intrinsym.app import cli
 from intrinsym.errors import OutputError, ResultError
 
 SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
@@ -117,7 +118,7 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path):
         [
             sys.executable,
             "-m",
-            "intrinsym.cli",
+            "intrinsym.app.cli",
             "detect",
             "--example",
             "-o",
@@ -155,7 +156,7 @@ def test_numba_cache_falls_back_without_a_writable_home_or_install(tmp_path):
     (tmp_path / "file").write_text("")
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
     env.update(HOME=str(tmp_path / "file" / "home"), PYTHONPATH=str(copy), TMPDIR=str(tmp_path))
-    code = "import os, intrinsym, intrinsym.descriptors; print(intrinsym.__file__, os.environ['NUMBA_CACHE_DIR'])"
+    code = "import os, intrinsym, intrinsym.unary.descriptors; print(intrinsym.__file__, os.environ['NUMBA_CACHE_DIR'])"
     p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     where, cache = p.stdout.split()

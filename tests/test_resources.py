@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from intrinsym import cli, make_params, resources
+from intrinsym import make_params, resources
+from intrinsym.app import cli
 from intrinsym.errors import IntrinsymError, ResourceError
 from intrinsym.resources import check_memory
 

@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 from conftest import sphere_result
-from intrinsym import Result, cli, files, resources
-from intrinsym.batching import work
+from intrinsym import Result, files, resources
+from intrinsym.app import cli
+from intrinsym.app.batching import work
 from intrinsym.errors import OutputError, ResourceError, ResultError
 from test_reliability import no_work, one_line_error  # noqa: F401 (a fixture)
 
@@ -262,7 +263,7 @@ def test_a_deflate_bomb_in_result_npz_is_not_inflated(tmp_path, capsys):
     assert npz.stat().st_size < 1_000_000
     # the peak of this process's own memory (VmHWM): ru_maxrss keeps, across exec, the
     # high-water mark of the process it was forked from (pytest, large late in the suite)
-    code = "import sys\nfrom intrinsym.cli import main\n"
+    code = "import sys\nfrom intrinsym.app.cli import main\n"
     code += f"rc = main(['query', {str(out)!r}, '--vertex', '0'])\n"
     code += "hwm = [l.split()[1] for l in open('/proc/self/status') if l.startswith('VmHWM:')][0]\n"
     code += "print(hwm, file=sys.stderr); sys.exit(rc)"

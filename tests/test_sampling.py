@@ -8,12 +8,7 @@ import trimesh
 from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
-from intrinsym.sampling import (
-    area_uniform_points,
-    farthest_point_sampling,
-    spacing_for_count,
-    subdivide_to,
-)
+from intrinsym.mesh.sampling import area_uniform_points, farthest_point_sampling, spacing_for_count, subdivide_to
 
 
 def cloud() -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Tests of intrinsym.shape: validation of arrays, cleaning and basic geometry."""
+"""Tests of intrinsym.mesh.shape: validation of arrays, cleaning and basic geometry."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import trimesh
 import intrinsym
 from conftest import PYRAMID_F, PYRAMID_V, mirror_shape, sphere_points
 from intrinsym.errors import InputError
-from intrinsym.shape import Shape, clean, from_arrays, orient_faces, surface_area, vertex_areas, vertex_normals
+from intrinsym.mesh.shape import Shape, clean, from_arrays, orient_faces, surface_area, vertex_areas, vertex_normals
 
 # ---------------------------------------------------------------------------
 # construction and validation

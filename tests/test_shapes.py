@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from intrinsym import shapes
-from intrinsym.geodesics import mesh_edges
+from intrinsym.geodesics.geodesics import mesh_edges
+from intrinsym.mesh import generated as shapes
 
 
 def edge_change(vertices, faces, perm):
@@ -104,7 +104,8 @@ def test_unknown_shape():
 
 
 def test_generate_command_writes_mesh_and_ground_truth(tmp_path):
-    from intrinsym import cli, load
+    from intrinsym import load
+    from intrinsym.app import cli
 
     assert cli.main(["generate", "lantern", "-o", str(tmp_path / "lan.off"), "--resolution", "4"]) == 0
     a, b = load(tmp_path / "lan.off"), load(tmp_path / "lan_b.off")
@@ -143,7 +144,8 @@ def test_partial_limbs_are_exact_rotated_copies_and_the_body_has_no_symmetry():
 
 
 def test_generate_partial_writes_a_map_with_missing_entries(tmp_path):
-    from intrinsym import cli, evaluate
+    from intrinsym.app import cli
+    from intrinsym.evaluation import evaluate
 
     assert cli.main(["generate", "partial", "-o", str(tmp_path / "p.off"), "--resolution", "4"]) == 0
     sym = evaluate.load_symmetry_map(tmp_path / "p.sym.npy", len(shapes.partial(4).vertices), allow_missing=True)

@@ -18,8 +18,10 @@ from numba.core.caching import _CacheLocator
 
 import intrinsym
 from conftest import sphere_result
-from intrinsym import _dijkstra, cli, pipeline
-from intrinsym.batching.engine import thread_environment
+from intrinsym import pipeline
+from intrinsym.app import cli
+from intrinsym.app.batching.engine import thread_environment
+from intrinsym.geodesics import _dijkstra
 
 SRC = Path(intrinsym.__file__).parent
 
@@ -54,7 +56,7 @@ def test_a_numba_cache_planted_in_the_temporary_folder_is_not_loaded(tmp_path: P
     index there whose unpickling runs a command; the run compiles elsewhere, unharmed."""
     env = _read_only_install(tmp_path)
     shared = tmp_path / "tmp" / f"intrinsym-numba-cache-{os.getuid()}"
-    kernel = tmp_path / "ro" / "intrinsym" / "_dijkstra.py"
+    kernel = tmp_path / "ro" / "intrinsym" / "geodesics" / "_dijkstra.py"
     index = (
         shared
         / _CacheLocator.get_suitable_cache_subpath(str(kernel))
@@ -76,7 +78,7 @@ def test_a_numba_cache_planted_in_the_temporary_folder_is_not_loaded(tmp_path: P
         shared.chmod(0o755)
     code = (
         "import os, numpy as np, intrinsym\n"
-        "from intrinsym import _dijkstra\n"
+        "from intrinsym.geodesics import _dijkstra\n"
         "_dijkstra.grow_int(np.zeros(2, np.int64), 1)\n"
         "cache = os.environ['NUMBA_CACHE_DIR']\n"
         "print(cache, oct(os.stat(cache).st_mode & 0o777))\n"
@@ -138,7 +140,8 @@ def test_running_out_of_memory_beyond_the_estimate_is_one_line(tmp_path: Path, m
 FULL_DISK = """
 import contextlib, io, json, os, shutil, sys
 from pathlib import Path
-from intrinsym import Result, cli, pipeline
+from intrinsym import Result, pipeline
+from intrinsym.app import cli
 
 disk, saved = Path(sys.argv[1]), Path(sys.argv[2])
 out, filler = disk / "out", disk / "filler"

@@ -8,9 +8,11 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from conftest import shared
-from intrinsym import evaluate, shapes, spectral
-from intrinsym.io import load
-from intrinsym.shape import clean, from_arrays
+from intrinsym.evaluation import evaluate
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.io import load
+from intrinsym.mesh.shape import clean, from_arrays
+from intrinsym.spectral import spectral
 
 
 def best_score(predicted, vertices, faces, maps) -> evaluate.MapScores:
@@ -81,7 +83,7 @@ def test_seed_map_leaves_out_the_pairs_it_cannot_explain():
 
 @pytest.mark.parametrize("involution", [False, True])
 def test_zoomout_recovers_a_mirror_from_a_noisy_start(mirror, involution):
-    from intrinsym import laplacian
+    from intrinsym.spectral import laplacian
 
     v, f, sym = mirror
     _, evecs = laplacian.eigenpairs(v, f, 31)
@@ -147,7 +149,7 @@ def test_spectral_symmetry_on_tosca_wolf():
 
 
 def test_seeded_symmetry_refines_sparse_noisy_pairs(mirror):
-    from intrinsym import laplacian
+    from intrinsym.spectral import laplacian
 
     v, f, sym = mirror
     _, evecs = laplacian.eigenpairs(v, f, 31)
@@ -180,7 +182,7 @@ def test_the_device_searches_give_the_cpu_maps(mirror, monkeypatch):
     functional maps and the point maps are those of the CPU search, exactly."""
     import sys
 
-    from intrinsym import laplacian, neighbours
+    from intrinsym.spectral import laplacian, neighbours
 
     monkeypatch.setitem(sys.modules, "cupy", np)
     dense, searched = neighbours.dense_nearest_rows, []
@@ -207,7 +209,7 @@ def test_the_device_searches_give_the_cpu_maps(mirror, monkeypatch):
 
 def test_seeded_symmetry_keeps_the_seeded_one_of_several_symmetries():
     """On an ellipsoid with seven symmetries, the pairs pick which one comes out."""
-    from intrinsym import laplacian
+    from intrinsym.spectral import laplacian
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     v = sphere.vertices * [1.0, 1.6, 2.5]
@@ -223,7 +225,7 @@ def test_seeded_map_between_two_shapes_recovers_a_vertex_permutation(mirror):
     """Two-shape form: the second shape is the first, rotated, scaled by 2 and with its
     vertices shuffled; sparse pairs of its mirror seed the map, which must come out as
     the mirror composed with the shuffle."""
-    from intrinsym import laplacian
+    from intrinsym.spectral import laplacian
 
     v, f, sym = mirror
     rng = np.random.default_rng(3)

@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from intrinsym.extract import Symmetry
-from intrinsym.geodesics import SparseDistances
-from intrinsym.records import part_vertices, records
-from intrinsym.support import SourceGraph, Support
+from intrinsym.extract.records import part_vertices, records
+from intrinsym.extract.support import SourceGraph, Support
+from intrinsym.extract.symmetry import Symmetry
+from intrinsym.geodesics.geodesics import SparseDistances
 
 
 def line_support(self_match: bool = True) -> Support:

@@ -6,9 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from intrinsym import cli, geodesics, shapes, symmetry_group
+from intrinsym.app import cli
 from intrinsym.errors import InputError
-from intrinsym.shape import Shape
+from intrinsym.evaluation import symmetry_group
+from intrinsym.geodesics import geodesics
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import Shape
 
 SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
 

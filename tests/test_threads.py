@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 
 from conftest import sphere_points, unit_sphere
-from intrinsym import _threads, geodesics
-from intrinsym.bp import belief_propagation
-from intrinsym.descriptors import nmi, quantize, spin_images
-from intrinsym.laplacian import eigenpairs
-from intrinsym.neighbours import nearest_rows
-from intrinsym.refine import spectral_descent
+from intrinsym import _threads
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap.refine import spectral_descent
+from intrinsym.mrf.bp import belief_propagation
+from intrinsym.spectral.laplacian import eigenpairs
+from intrinsym.spectral.neighbours import nearest_rows
+from intrinsym.unary.descriptors import nmi, quantize, spin_images
 from test_bp import sphere_problem
 
 

@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 import intrinsym
-from intrinsym import evaluate, geodesics, shapes, unary
-from intrinsym.shape import Shape, surface_area
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import Shape, surface_area
+from intrinsym.unary import unary
 
 SMALL = dict(n_source=40, n_target=600, spin_cloud=6000, iterations=3)
 
@@ -114,7 +117,7 @@ def partial_scores(g, r):
 
 @pytest.fixture(scope="module")
 def partial_shape():
-    from intrinsym import shapes
+    from intrinsym.mesh import generated as shapes
 
     return shapes.partial(resolution=10)
 

@@ -8,10 +8,10 @@ from scipy.spatial import cKDTree
 
 import intrinsym
 from conftest import mirror_shape
-from intrinsym.globalmap import carried_map
-from intrinsym.shape import from_arrays
+from intrinsym.globalmap.globalmap import carried_map
+from intrinsym.globalmap.vertex_maps import carried_to_components
+from intrinsym.mesh.shape import from_arrays
 from intrinsym.surface import prepare
-from intrinsym.vertex_maps import carried_to_components
 
 
 def _with_loose_parts() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -12,7 +12,8 @@ from matplotlib.image import imread
 from scipy.spatial import cKDTree
 
 from conftest import sphere_result
-from intrinsym import Result, viewer, viz
+from intrinsym import Result
+from intrinsym.app import viewer, viz
 
 CHROMIUM = Path("/usr/bin/chromium")
 

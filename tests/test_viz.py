@@ -10,7 +10,7 @@ import pytest
 from matplotlib.image import imread
 
 from conftest import sphere_result
-from intrinsym import viz
+from intrinsym.app import viz
 from intrinsym.pipeline import Result
 
 
@@ -173,7 +173,7 @@ def test_figure_params_reject_bad_values():
 
 def run(*args):
     return subprocess.run(
-        [sys.executable, "-m", "intrinsym.cli", *map(str, args)], capture_output=True, text=True, timeout=300
+        [sys.executable, "-m", "intrinsym.app.cli", *map(str, args)], capture_output=True, text=True, timeout=300
     )
 
 
@@ -211,7 +211,7 @@ def test_progress_keeps_stage_lines_and_shows_bp_iterations_transiently():
 
     from rich.console import Console
 
-    from intrinsym import cli
+    from intrinsym.app import cli
     from intrinsym.progress import BPIteration, StageDone
 
     sink = StringIO()

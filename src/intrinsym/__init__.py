@@ -123,24 +123,23 @@ def example_path() -> Path:
     return Path(str(importlib.resources.files("intrinsym") / "data" / "spot.obj"))
 
 
-from .distortion import DistortionScores, map_distortion  # noqa: E402
 from .errors import InputError, IntrinsymError, ParameterError, ResourceError  # noqa: E402
-from .evaluate import MapScores, MarginalScores, load_symmetry_map, score_map, score_marginals  # noqa: E402
+from .evaluation import MapScores, MarginalScores, load_symmetry_map, score_map, score_marginals  # noqa: E402
 from .extract import Extraction, ExtractParams, Symmetry  # noqa: E402
-from .io import load  # noqa: E402
+from .globalmap import DistortionScores, map_distortion  # noqa: E402
+from .mesh import Shape, load  # noqa: E402
 from .params import Params, make_params  # noqa: E402
-from .pipeline import detect, match  # noqa: E402
+from .pipeline import detect, match, prepare  # noqa: E402
 from .progress import BPIteration, StageDone  # noqa: E402
-from .result import Result  # noqa: E402
-from .runinfo import RunInfo  # noqa: E402
-from .shape import Shape  # noqa: E402
+from .result import Result, RunInfo  # noqa: E402
+from .surface import Surface  # noqa: E402
 
 
 def __getattr__(name: str):
-    """``intrinsym.batch`` (:func:`intrinsym.batching.batch`), imported on first use: it
+    """``intrinsym.batch`` (:func:`intrinsym.app.batching.batch`), imported on first use: it
     brings Dask and pandas."""
     if name == "batch":
-        from .batching import batch
+        from .app.batching import batch
 
         return batch
     raise AttributeError(f"module 'intrinsym' has no attribute {name!r}")
@@ -162,6 +161,7 @@ __all__ = [
     "RunInfo",
     "Shape",
     "StageDone",
+    "Surface",
     "Symmetry",
     "__version__",
     "batch",
@@ -172,6 +172,7 @@ __all__ = [
     "make_params",
     "map_distortion",
     "match",
+    "prepare",
     "score_map",
     "score_marginals",
 ]

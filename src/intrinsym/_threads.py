@@ -8,7 +8,7 @@ BP kernels), and the threads reach the same speed. On two cores a ``prange`` als
 at run time: its OpenMP workers spin after each loop and take the cores from the BLAS
 threads of the NumPy products around it. A kernel called thousands of times on short
 blocks runs serially below a size where the threads pay for their start
-(:data:`intrinsym.neighbours.PARALLEL_QUERIES`).
+(:data:`intrinsym.spectral.neighbours.PARALLEL_QUERIES`).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Each :class:`Params` field carries its help text, paper value and unit in its
 ``dataclasses.field`` metadata (:func:`describe` reads them); the command-line options
-(:mod:`intrinsym.cli`) and ``docs/parameters.md`` (:func:`markdown_table`) are generated
+(:mod:`intrinsym.app.cli`) and ``docs/parameters.md`` (:func:`markdown_table`) are generated
 from them. Lengths are in units of sqrt(surface area), so every default is scale-free.
 """
 
@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from typing import Any, Literal, get_args, get_origin
 
 from .errors import ParameterError
-from .extract import ExtractParams
-from .laplacian import FINE_PER_COARSE
-from .reflection import RETURN_RADIUS
+from .extract.reflection import RETURN_RADIUS
+from .extract.symmetry import ExtractParams
+from .spectral.laplacian import FINE_PER_COARSE
 
 Schedule = Literal["auto", "colour", "serial", "residual", "flooding"]
 Backend = Literal["auto", "cpu", "gpu"]
@@ -39,7 +39,7 @@ NO_PARTNER_WEIGHT = 0.7
 #: The global map is seeded ZoomOut's (vertex-precise) unless it keeps this much less
 #: marginal mass (within ``mass_radius``) than the extraction's map (resolved to the
 #: sample spacing); a spectral candidate replaces the model's map only when it keeps this
-#: much more (:func:`intrinsym.globalmap.choose_global_map`; measured in docs/results.md).
+#: much more (:func:`intrinsym.globalmap.globalmap.choose_global_map`; measured in docs/results.md).
 MAP_MARGIN = 0.1
 #: A mesh with fewer vertices than this many times the larger sample count is
 #: midpoint-subdivided (each round quadruples it) until it has that many: the working
@@ -170,7 +170,7 @@ class Params:
     eigen_coarse: int = _p(
         8000,
         f"vertices of the decimated copy a mesh of more than {FINE_PER_COARSE} times as many is first solved on for "
-        "the eigenpairs (then refined on the mesh itself: intrinsym.laplacian.two_grid_eigenpairs); "
+        "the eigenpairs (then refined on the mesh itself: intrinsym.spectral.laplacian.two_grid_eigenpairs); "
         "0 solves on the mesh alone",
         "unary",
     )
@@ -424,7 +424,7 @@ class Params:
 
     def extraction(self, no_partner: bool = False) -> ExtractParams:
         """The symmetry-extraction parameters; ``no_partner``: the trivial match was kept
-        at a weight (:meth:`intrinsym.result.Result.extraction_params` knows whether)."""
+        at a weight (:meth:`intrinsym.result.result.Result.extraction_params` knows whether)."""
         return ExtractParams(
             threshold=self.peak_threshold,
             d_error=self.d_error,

@@ -3,9 +3,9 @@ extraction -> global map.
 
 :func:`detect` matches a shape to itself (partial intrinsic symmetries); :func:`match`
 matches shape A to shape B (the paper's ambiguous two-shape case). Both return a
-:class:`~intrinsym.result.Result`. The steps between (:func:`source_graph`,
+:class:`~intrinsym.result.result.Result`. The steps between (:func:`source_graph`,
 :func:`pairwise_model`, :func:`unary_model`, :func:`solve_bp`, :func:`extraction_support`,
-:func:`extract_symmetries`, :func:`intrinsym.globalmap.choose_global_map`) each take and
+:func:`extract_symmetries`, :func:`intrinsym.globalmap.globalmap.choose_global_map`) each take and
 return arrays and can run alone.
 """
 
@@ -19,25 +19,24 @@ from typing import Any
 
 import numpy as np
 
-from . import bp, geodesics, model, resources, sampling, unary
+from . import resources
 from .errors import ParameterError
-from .extract import Extraction, consistency, extract_from_support
-from .globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .params import (
-    NO_PARTNER_WEIGHT,
-    OFFSET_TARGETS,
-    PARTIAL_AREA,
-    WORK_PER_SAMPLE,
-    Params,
-    make_params,
-)
+from .extract.extract import consistency, extract_from_support
+from .extract.reflection import RETURN_RADIUS, reflection
+from .extract.support import SourceGraph, Support
+from .extract.symmetry import Extraction
+from .geodesics import geodesics
+from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
+from .mesh import sampling
+from .mesh.shape import surface_area
+from .mrf import bp, model
+from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, PARTIAL_AREA, WORK_PER_SAMPLE, Params, make_params
 from .progress import BPIteration, ProgressCallback, StageDone
-from .reflection import RETURN_RADIUS, reflection
-from .result import Result
-from .runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
-from .shape import surface_area
-from .support import SourceGraph, Support
-from .surface import ShapeLike, Surface, as_shape, prepare, prepare_pair, sample
+from .result.result import Result
+from .result.runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
+from .surface import ShapeLike, Surface, as_shape, prepare_pair, sample, serves
+from .surface import prepare as prepare_surface
+from .unary import unary
 
 log = logging.getLogger("intrinsym")
 
@@ -82,7 +81,7 @@ class Pairwise:
     lam : float
         lambda of Eq. 6.
     delta : float
-        Half-width of the ring where psi > rho^2 (:func:`intrinsym.model.truncation_width`).
+        Half-width of the ring where psi > rho^2 (:func:`intrinsym.mrf.model.truncation_width`).
     targets : SparseDistances
         Target-to-target geodesics out to the longest edge plus ``delta`` (what the exact
         message needs), or ``pass_radius`` when further passes need more.
@@ -122,7 +121,7 @@ def unary_model(
         beyond what the calibration and the trivial match need (one Dijkstra per sample
         serves both).
     spectra : pair of (eigenvalues, eigenvectors) or None
-        Of source and target (:func:`intrinsym.unary.spectra`).
+        Of source and target (:func:`intrinsym.unary.unary.spectra`).
     """
     spectra = unary.spectra(src, tgt, p, self_match)
     trivial = self_match and p.remove_trivial and p.trivial_radius > 0
@@ -280,7 +279,7 @@ def decide_identity(
     posed symmetry's argmax keeps nearly all of them (within ``d_error`` or the target
     spacing ``t_spacing``). Where the unary is weak (strongly posed shapes) it keeps
     fewer, but a reflection's argmax still acts as one at most samples (its own inverse,
-    the surface's orientation reversed: :func:`intrinsym.reflection.reflection`), which
+    the surface's orientation reversed: :func:`intrinsym.extract.reflection.reflection`), which
     an invented self-map does not: either test makes the symmetry global. Self-matching:
     ``ps`` and ``pt`` are working vertices of ``src``.
     """
@@ -497,8 +496,49 @@ def sample_pair(src: Surface, tgt: Surface, p: Params) -> tuple[np.ndarray, np.n
     return sample(src, p.n_source, p.source_spacing, p.seed + 1), sample(tgt, p.n_target, p.target_spacing, p.seed)
 
 
-def detect(
+def prepare(
     shape: ShapeLike,
+    params: Params | None = None,
+    *,
+    n_source: int | None = None,
+    n_target: int | None = None,
+    preset: str = "default",
+) -> Surface:
+    """The working surface of a shape for :func:`detect`, to reuse across runs.
+
+    Cleaned (duplicate vertices merged; degenerate and duplicate faces and unreferenced
+    vertices dropped), centred, normalised to unit surface area, midpoint-subdivided
+    while it has fewer than ``2 max(n_source, n_target)`` vertices (a mesh; a point cloud
+    is never subdivided), with its geodesic graph and normals: what :func:`detect` does
+    before sampling. ``detect(prepare(shape, p), p)`` equals ``detect(shape, p)`` exactly,
+    so a parameter sweep prepares once.
+
+    Parameters
+    ----------
+    shape : path, Shape, (vertices, faces) tuple, (N, 3) array or trimesh object
+        As in :func:`detect`.
+    params : Params, optional
+        The parameters of the detects it is for (default: the preset's); only the sample
+        counts matter: they set the working size.
+    n_source, n_target : int, optional
+        Override the fields of the same names.
+    preset : {"default", "paper"}
+        The parameters when ``params`` is not given.
+
+    Returns
+    -------
+    Surface
+        :func:`detect` takes it in place of the shape with any parameters whose sample
+        counts ask for the same working size (any counts when no subdivision was needed);
+        with others it raises :class:`~intrinsym.errors.ParameterError` rather than
+        prepare again.
+    """
+    p = resolve_params(params, preset, n_source=n_source, n_target=n_target)
+    return prepare_surface(as_shape(shape), _min_vertices(p))
+
+
+def detect(
+    shape: ShapeLike | Surface,
     params: Params | None = None,
     *,
     n_source: int | None = None,
@@ -514,8 +554,10 @@ def detect(
     shape : path, Shape, (vertices, faces) tuple, (N, 3) array or trimesh object
         A triangle mesh or a point cloud (faces None; an array is one). The result's
         vertex indices refer to its vertices in the order it gives them: a file's
-        order (:func:`~intrinsym.io.load`), a trimesh object's ``vertices``, an
-        array's rows.
+        order (:func:`~intrinsym.mesh.io.load`), a trimesh object's ``vertices``, an
+        array's rows. Or a :class:`~intrinsym.surface.Surface` from :func:`prepare`, not
+        prepared again: it must have been prepared for these sample counts' working size
+        (else :class:`~intrinsym.errors.ParameterError`).
     params : Params, optional
         Every parameter (default: the preset's).
     n_source, n_target, seed : int, optional
@@ -533,13 +575,24 @@ def detect(
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
     check_machine(p)
     clock = _Clock(progress)
-    s = as_shape(shape)
-    clock.lap("load")
-    surf = prepare(s, _min_vertices(p))
+    if isinstance(shape, Surface):
+        surf = shape
+        if not serves(surf, _min_vertices(p)):
+            raise ParameterError(
+                f"the surface was prepared for a working size of {surf.min_vertices} vertices (it has "
+                f"{len(surf.shape.vertices)}); n_source={p.n_source}, n_target={p.n_target} need "
+                f"{_min_vertices(p)}: prepare it with these parameters, intrinsym.prepare(shape, params)"
+            )
+        clock.lap("load")
+    else:
+        s = as_shape(shape)
+        clock.lap("load")
+        surf = prepare_surface(s, _min_vertices(p))
     clock.lap("prepare")
     ps, pt = sample_pair(surf, surf, p)
     clock.lap("sampling")
-    return _solve(surf, surf, ps, pt, p, clock, True, {"mode": "detect", "input": str(s.path), "preset": preset})
+    header = {"mode": "detect", "input": str(surf.shape.path), "preset": preset}
+    return _solve(surf, surf, ps, pt, p, clock, True, header)
 
 
 def match(

@@ -23,7 +23,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import OutputError, ResourceError, path_label
-from .params import WORK_PER_SAMPLE
 
 if TYPE_CHECKING:
     from .params import Params
@@ -292,6 +291,8 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     -------
     Estimate
     """
+    from .params import WORK_PER_SAMPLE  # here: the mesh readers use this module, and params sits above them
+
     s = _count(p.n_source, p.source_spacing)
     t = _count(p.n_target, p.target_spacing)
     passes = p.passes if p.passes is not None else 1 if self_match else 2

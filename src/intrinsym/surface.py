@@ -1,6 +1,6 @@
 """The working surface the stages run on: cleaned, normalised to unit area, sampled.
 
-:func:`prepare` turns any :class:`~intrinsym.shape.Shape` into a :class:`Surface`
+:func:`prepare` turns any :class:`~intrinsym.mesh.shape.Shape` into a :class:`Surface`
 (centred, unit sqrt(area), midpoint-subdivided when too coarse, with its geodesic graph
 and normals); :func:`prepare_pair` prepares two for matching in a common unit;
 :func:`sample` picks Poisson-disc samples of it.
@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from . import geodesics, io, sampling
 from .errors import InputError, ParameterError
+from .geodesics import geodesics
+from .mesh import io, sampling
+from .mesh.shape import Shape, clean, from_arrays, surface_area, vertex_normals
 from .params import PARTIAL_AREA, MatchScale
-from .shape import Shape, clean, from_arrays, surface_area, vertex_normals
 
 #: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, an (N, 3)
 #: array (a point cloud), or an object with ``vertices`` (and ``faces``), such as a
@@ -46,6 +47,12 @@ class Surface:
     graph : scipy.sparse.csr_matrix
         Geodesic graph of the working shape.
     normals : (N, 3) float64
+    min_vertices : int
+        The working size it was prepared for: a mesh with fewer vertices is subdivided
+        until it has this many (2 max(n_source, n_target) of the parameters it was
+        prepared with, :func:`intrinsym.prepare`).
+    subdivided : bool
+        Whether the cleaned mesh was subdivided to reach it.
     """
 
     shape: Shape
@@ -55,6 +62,8 @@ class Surface:
     scale: float
     graph: Any
     normals: np.ndarray
+    min_vertices: int = 0
+    subdivided: bool = False
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         """Normalised coordinates -> the input file's coordinates."""
@@ -89,8 +98,10 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
     scale = float(np.sqrt(area))
     vertices = (cleaned.vertices - center) / scale
     faces = cleaned.faces
+    subdivided = False
     if faces is not None and len(vertices) < min_vertices:
         vertices, faces = sampling.subdivide_to(vertices, faces, min_vertices)
+        subdivided = True
     work = Shape(vertices, faces, shape.path)
     return Surface(
         shape=work,
@@ -100,7 +111,19 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
         scale=scale,
         graph=geodesics.surface_graph(vertices, faces),
         normals=vertex_normals(work),
+        min_vertices=min_vertices,
+        subdivided=subdivided,
     )
+
+
+def serves(surface: Surface, min_vertices: int) -> bool:
+    """Whether ``surface`` is what :func:`prepare` gives for ``min_vertices``: it was
+    prepared for that size, or it needed no subdivision and has at least that many
+    vertices (or is a point cloud, never subdivided)."""
+    if min_vertices == surface.min_vertices:
+        return True
+    enough = surface.shape.faces is None or len(surface.shape.vertices) >= min_vertices
+    return not surface.subdivided and enough
 
 
 def rescaled(surface: Surface, factor: float) -> Surface:
@@ -138,7 +161,7 @@ def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tu
 def as_shape(obj: ShapeLike) -> Shape:
     """Read a :data:`ShapeLike` into a :class:`Shape`.
 
-    The vertices keep the input's order: a file's (:func:`intrinsym.io.load`), the
+    The vertices keep the input's order: a file's (:func:`intrinsym.mesh.io.load`), the
     rows of an array, a trimesh object's ``vertices``. An array is read as a point
     cloud; one that is not (N, 3), holds NaN or infinity, or has fewer than 4 rows is
     an :class:`~intrinsym.errors.InputError`.
