@@ -111,7 +111,7 @@ _REFLECTION = (
 #: is one where an isometry-based method can be asked to find it: 1.8 times the largest
 #: mean of a true symmetry over the vertices where the found maps are right (SCAPE's
 #: reflection, 0.0056), below every mean of michael's symmetry file over the (finger)
-#: vertices the found maps miss (0.011-0.018; docs/results.md).
+#: vertices the found maps miss (0.011-0.018; docs/notes/2026-11-28-results-behind-the-defaults.md).
 LOCAL_ISOMETRY = 0.01
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 8

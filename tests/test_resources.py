@@ -86,7 +86,7 @@ def test_estimate_grows_with_the_sizes():
 
 #: Whole `intrinsym detect` processes on the 2-core development machine, warm Numba cache:
 #: input vertices, sizes, wall seconds and peak resident memory (GNU time's %e and %M;
-#: docs/benchmarks.md, "The run estimate" and "A coarser working shape").
+#: docs/notes/2026-11-28-speed-behind-the-defaults.md, "The run estimate" and "A coarser working shape").
 MEASURED = [
     (2930, {}, 6.81, 392_476e3),  # --example: spot, subdivided once, to 11,714 vertices
     (27894, {}, 11.71, 514_228e3),  # TOSCA cat1

@@ -38,13 +38,13 @@ Writer = Callable[[Path], None]
 
 #: Deflate level of :func:`save_npz`. Level 1 writes a default-size result.npz (17 MB of
 #: float arrays) 2.6x faster than NumPy's ``savez_compressed`` (zlib's level 6) for a
-#: file 2 % larger: float noise barely compresses at any level (docs/benchmarks.md).
+#: file 2 % larger: float noise barely compresses at any level (docs/notes/2026-11-28-speed-behind-the-defaults.md).
 NPZ_LEVEL = 1
 #: :func:`save_npz` stores an array without compression when deflating its first
 #: ``NPZ_PROBE_BYTES`` saves less than ``NPZ_MIN_SAVING`` of them: the sorted float64
 #: geodesics of an elephant-size result (87 MB) deflate by 8 % (7 % on the probe) in 2.2
 #: s, its marginals by 27 % (18 % on the probe), the index arrays by half or more
-#: (docs/benchmarks.md).
+#: (docs/notes/2026-11-28-speed-behind-the-defaults.md).
 NPZ_MIN_SAVING = 0.1
 NPZ_PROBE_BYTES = 1 << 18
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import textwrap
 import types
 import typing
 from dataclasses import dataclass
@@ -39,11 +40,13 @@ NO_PARTNER_WEIGHT = 0.7
 #: The global map is seeded ZoomOut's (vertex-precise) unless it keeps this much less
 #: marginal mass (within ``mass_radius``) than the extraction's map (resolved to the
 #: sample spacing); a spectral candidate replaces the model's map only when it keeps this
-#: much more (:func:`intrinsym.globalmap.globalmap.choose_global_map`; measured in docs/results.md).
+#: much more (:func:`intrinsym.globalmap.choose_global_map`; measured in
+#: docs/notes/2026-11-28-results-behind-the-defaults.md).
 MAP_MARGIN = 0.1
 #: A mesh with fewer vertices than this many times the larger sample count is
 #: midpoint-subdivided (each round quadruples it) until it has that many: the working
-#: shape the samples, geodesics and descriptors live on (measured in docs/benchmarks.md).
+#: shape the samples, geodesics and descriptors live on (measured in
+#: docs/notes/2026-11-28-speed-behind-the-defaults.md).
 WORK_PER_SAMPLE = 2
 #: Targets nearest a calibration point on the surface that the "offset" rule pairs it with.
 OFFSET_TARGETS = 3
@@ -560,6 +563,26 @@ def describe() -> list[Field]:
         fixed = (m["help"], m["group"], m["paper"], m["unit"], m["self_match"], m["match_only"])
         out.append(Field(f.name, flag, off, kind, choices, words, optional, f.default, *fixed))
     return out
+
+
+def _field_docs() -> str:
+    """The numpydoc "Parameters" section of :class:`Params`, one entry per field from its
+    metadata: ``help(intrinsym.Params)`` shows what the CLI's help and the docs show."""
+    lines = ["", "    Parameters", "    ----------"]
+    for f in describe():
+        kind = f.kind.__name__ + (" or None" if f.optional else "")
+        if f.choices:
+            kind = "{" + ", ".join(repr(c) for c in f.choices) + "}"
+        lines.append(f"    {f.name} : {kind}, default {f.default!r}")
+        notes = [f"unit {f.unit}" if f.unit else "", f"paper: {f.paper}" if f.paper else ""]
+        text = f.help + "".join(f" ({n})" for n in notes if n)
+        lines.extend(
+            f"        {line}" for line in textwrap.wrap(text, 80, break_long_words=False, break_on_hyphens=False)
+        )
+    return "\n".join(lines) + "\n"
+
+
+Params.__doc__ = (Params.__doc__ or "").rstrip() + "\n" + _field_docs()
 
 
 def markdown_table() -> str:

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from .params import Params
 
 #: BP iterations per pass the time estimate assumes: the median over the 36 shapes of
-#: docs/results.md's benchmark (7-20 on 34 of them, 41 and 72 on the others).
+#: docs/results.md's benchmark (7-16 on 32 of them, 20, 24, 41 and 72 on the others).
 TYPICAL_ITERATIONS = 11
 
 
@@ -265,7 +265,7 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
 
     A model of the measured stages (TOSCA cat1 and michael1 at |Ps| = 250, |Pt| = 4000
     and at the paper's elephant size, 271 / 12722, on the 2-core development machine;
-    docs/benchmarks.md): the interpreter and libraries take 150 MB and 2 s; the working
+    docs/notes/2026-11-28-speed-behind-the-defaults.md): the interpreter and libraries take 150 MB and 2 s; the working
     shape (a mesh of fewer than ``WORK_PER_SAMPLE`` max(|Ps|, |Pt|) vertices subdivided,
     each round four times as many) 11 kB and 0.16 ms per vertex (cleaning, geodesic
     graph, eigenpairs, the global map); the target distances 10 ns per vertex and
@@ -274,7 +274,7 @@ def estimate_run(n_vertices: int, p: Params, self_match: bool = True) -> Estimat
     |Pt| per source edge (about 3 |Ps| edges), plus the target rings (about 23 |Pt| /
     |Ps| neighbours per target); one iteration visits each edge's ring rows, about
     0.07 us sqrt(|Ps|) |Pt|^1.5, for ``TYPICAL_ITERATIONS`` per pass. Within 40 % of
-    the measured time and 20 % of the memory on the runs of docs/benchmarks.md; a run
+    the measured time and 20 % of the memory on the runs of docs/notes/2026-11-28-speed-behind-the-defaults.md; a run
     that needs many more BP iterations than the median takes longer. The result set
     holds the unary, the marginals of each pass and the target rings (12 bytes per
     neighbour) as float32 |Ps| x |Pt| arrays, and about 100 bytes per input vertex.

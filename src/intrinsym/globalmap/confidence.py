@@ -80,8 +80,8 @@ WITHIN = 0.05
 DISAGREEMENT_RANGE = 0.10
 #: :func:`round_trip` weighs a map only when at least this share of the vertices return
 #: within ``DISAGREEMENT_RANGE`` under it (0.73-1.00 on the global maps of the 11 TOSCA
-#: poses checked in docs/results.md; a rotation of order three returns only the vertices
-#: near its axis).
+#: poses checked in docs/notes/2026-11-28-results-behind-the-defaults.md; a rotation of
+#: order three returns only the vertices near its axis).
 INVOLUTIVE_SHARE = 0.5
 
 

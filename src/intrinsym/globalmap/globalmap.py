@@ -66,7 +66,7 @@ CELL_RADIUS = 0.05
 GUIDE_TOLERANCE = 0.05
 #: A vertex whose global-map image keeps its geodesic distances to the anchors of ``refine_anchors``
 #: within this many target spacings (root mean square, and to the nearest anchor) keeps it
-#: (:func:`intrinsym.globalmap.refine.trilaterate`; measured in docs/results.md).
+#: (:func:`intrinsym.globalmap.refine.trilaterate`; measured in docs/notes/2026-11-28-results-behind-the-defaults.md).
 REFINE_TOLERANCE = 2.0
 #: Samples farther than this (sqrt(area) units) from a vertex are not its anchors.
 REFINE_REACH = 0.3

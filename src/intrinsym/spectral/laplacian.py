@@ -45,11 +45,11 @@ COARSE_EXTRA = 20
 COARSE_PER_PAIR = 40
 #: The two-grid solve is used on meshes of more than this many times the coarse size;
 #: below, it gains little over the direct solve (0.8x on TOSCA's centaur, 15,768
-#: vertices; docs/benchmarks.md), so smaller meshes keep their exact eigenpairs.
+#: vertices; docs/notes/2026-11-28-speed-behind-the-defaults.md), so smaller meshes keep their exact eigenpairs.
 FINE_PER_COARSE = 2
 #: Inverse iterations on the fine mesh, each followed by a Rayleigh-Ritz projection:
 #: three bring the eigenvalues of TOSCA meshes within about 2e-3 of the direct solve's,
-#: which leaves BP's marginals unchanged (fewer moved the maps; docs/benchmarks.md).
+#: which leaves BP's marginals unchanged (fewer moved the maps; docs/notes/2026-11-28-speed-behind-the-defaults.md).
 POLISH_STEPS = 3
 #: Coarse vertices each fine vertex is interpolated from (inverse squared distance).
 _PROLONGATION_NEIGHBOURS = 3

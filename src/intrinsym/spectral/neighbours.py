@@ -49,7 +49,7 @@ DENSE_BLOCK_BYTES = 1 << 28
 # slower than the whole sum); no assumption about infinities (the best starts at inf).
 # A serial kernel of a query range, run on intrinsym._threads, not a prange loop: between
 # ZoomOut's BLAS products, the spinning OpenMP workers of a prange took the cores from
-# OpenBLAS's threads (8 ms per level on 3,000 rows, against 1 ms; docs/benchmarks.md)
+# OpenBLAS's threads (8 ms per level on 3,000 rows, against 1 ms; docs/notes/2026-11-28-speed-behind-the-defaults.md)
 @nb.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})
 def _search(
     lo: int,

@@ -403,7 +403,7 @@ def seed_map(
     error: on a reflection, the true image of a thin part on the mirror plane (a cat's
     tail) lies inside the trivial disc the model removes, so BP maps the whole part
     elsewhere, and those pairs stand out with residuals several times the median
-    (measured in docs/results.md).
+    (measured in docs/notes/2026-11-28-results-behind-the-defaults.md).
 
     Parameters
     ----------
