@@ -72,7 +72,7 @@ def test_result_contract(spot, spot_result, tmp_path):
             intrinsym.Result.ARRAYS
             + Support.KEYS
             + Extraction.KEYS
-            + ("source_mesh_vertices", "zoomout_map", "map_distortion")
+            + ("source_mesh_vertices", "global_map", "map_distortion")
         )
     assert (out / "symmetry_mass.npy").is_file()
     # every symmetry as a vertex map, the dominant one's row the symmetry map; its coverage listed
@@ -99,6 +99,21 @@ def test_a_format_2_folder_loads_without_its_involution(spot_result, tmp_path):
     assert again.params == spot_result.params
     assert again.info.identity.reflection is None and again.info.identity.weight == spot_result.info.identity.weight
     assert np.array_equal(again.marginals, spot_result.marginals)
+
+
+def test_a_format_4_folder_loads_its_zoomout_map_as_the_global_map(spot_result, tmp_path):
+    # format 4 stored the global map the run chose as zoomout_map
+    out = spot_result.save(tmp_path / "v4")
+    with np.load(out / "result.npz") as z:
+        arrays = {("zoomout_map" if k == "global_map" else k): z[k] for k in z.files}
+    assert "zoomout_map" in arrays
+    np.savez(out / "result.npz", **arrays)
+    run = json.loads((out / "run.json").read_text())
+    run["format_version"] = 4
+    (out / "run.json").write_text(json.dumps(run))
+    again = intrinsym.Result.load(out)
+    assert np.array_equal(again.global_map, spot_result.global_map)
+    assert np.array_equal(again.symmetry_map(), spot_result.symmetry_map())
 
 
 def _same(a, b) -> bool:
@@ -188,12 +203,12 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     assert chosen.mass == m[chosen.source] and {"extraction", "zoomout"} <= set(m)
     # ZoomOut's vertex-precise map unless it keeps clearly less mass than the extraction's
     assert chosen.source == ("zoomout" if m["zoomout"] >= m["extraction"] - MAP_MARGIN else "extraction"), m
-    assert r.zoomout_map.shape == (len(spot.vertices),) and r.zoomout_map.dtype == np.int64
+    assert r.global_map.shape == (len(spot.vertices),) and r.global_map.dtype == np.int64
     # -1 only where the reflection does not return a vertex (globalmap.supported_map): spot is whole
-    assert np.mean(r.zoomout_map >= 0) > 0.95 and np.mean(r.zoomout_map == np.arange(len(spot.vertices))) < 0.05
+    assert np.mean(r.global_map >= 0) > 0.95 and np.mean(r.global_map == np.arange(len(spot.vertices))) < 0.05
     out = r.save(tmp_path / "chosen")
-    assert np.array_equal(np.load(out / "symmetry_map.npy"), r.zoomout_map)
-    assert np.array_equal(intrinsym.Result.load(out).zoomout_map, r.zoomout_map)
+    assert np.array_equal(np.load(out / "symmetry_map.npy"), r.global_map)
+    assert np.array_equal(intrinsym.Result.load(out).global_map, r.global_map)
     conf = np.load(out / "symmetry_mass.npy")
     assert conf.shape == (len(spot.vertices),) and conf.dtype == np.float32 and 0 <= conf.min() <= conf.max() <= 1
     calibrated = np.load(out / "symmetry_confidence.npy")
@@ -220,7 +235,7 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     # a stored local distortion belongs to the chosen map: marked high, the extraction's
     # map still takes the first table
     high = np.ones(len(spot.vertices), dtype=np.float32)
-    without = dataclasses.replace(r, zoomout_map=None, map_distortion=high)
+    without = dataclasses.replace(r, global_map=None, map_distortion=high)
     plain = without.save(tmp_path / "plain")
     g = r.extraction.symmetries[r.extraction.global_index]
     cells = vertex_maps.vertex_map(g, r.support.vertex_source, r.target_point_vertex, len(r.marginals))
@@ -228,7 +243,7 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     assert np.array_equal(np.load(plain / "symmetry_map.npy"), cells)
     first_table = np.where(cells >= 0, confidence.calibrated(without.symmetry_score()), 0)
     assert np.allclose(np.load(plain / "symmetry_confidence.npy"), first_table, atol=1e-6)
-    assert intrinsym.Result.load(plain).zoomout_map is None
+    assert intrinsym.Result.load(plain).global_map is None
 
 
 def test_deterministic_for_a_seed(spot, spot_result):
@@ -372,6 +387,7 @@ def test_an_unsure_global_symmetry_runs_bp_again_wider_and_keeps_the_less_distor
     assert again.info.identity == i
 
 
+@pytest.mark.slow  # a whole default detect of a TOSCA pose: a benchmark regression (CI: -m slow)
 def test_victoria2_s_slid_identity_gives_way_to_the_wider_run():
     """TOSCA victoria2 at the defaults: BP's argmax keeps 0.80 of the source edges
     (threshold 0.85) and the reflection test passes (0.62), so the global symmetry is
@@ -441,7 +457,7 @@ def test_match_two_shapes(tmp_path):
     )
     r = intrinsym.match(a, moved, params)
     assert r.marginals.shape == (30, 1500)
-    assert r.zoomout_map is None and r.info.zoomout is None
+    assert r.global_map is None and r.info.zoomout is None
     assert r.info.mode == "match"
     # two BP passes by default in match mode; the second's unary lacks the first's argmax
     assert r.pass_marginals.shape == (1, 30, 1500) and len(r.info.bp.passes) == 1
@@ -483,6 +499,7 @@ def horse_sides(result: intrinsym.Result, reference: np.ndarray) -> list[tuple[f
     return out
 
 
+@pytest.mark.slow  # two matches of real scans at 150 / 1500 (CI: -m slow)
 def test_two_passes_find_the_identity_and_the_swap_of_two_horse_frames():
     # measured at this size: one pass extracts swaps and blends (own side 0.07-0.48);
     # the second pass adds the identity (0.91 of Ps, 0.76 of its pairs on the own side)

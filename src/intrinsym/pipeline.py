@@ -462,7 +462,7 @@ def _solve(
         info=info,
         support=support,
         extraction=extraction,
-        zoomout_map=None if chosen is None else chosen.vertex_map,
+        global_map=None if chosen is None else chosen.vertex_map,
         pass_marginals=np.stack([m for m, _ in outcome.passes]) if outcome.passes else None,
         map_distortion=map_distortion,
     )

@@ -37,11 +37,12 @@ from .runinfo import RunInfo, Sizes, stored_params
 #: What reading a truncated or corrupt result file raises.
 _UNREADABLE = (OSError, EOFError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile, zlib.error)
 
-#: Version-1 name of each renamed ``result.npz`` array.
-V1_ARRAYS = {
+#: The older name of each renamed ``result.npz`` array: the sample vertices' of format
+#: version 1, the global map's of versions 2 to 4 (version 1 called it ``global_map`` too).
+OLD_ARRAYS = {
     "source_point_vertex": "source_vertex",
     "target_point_vertex": "target_vertex",
-    "zoomout_map": "global_map",
+    "global_map": "zoomout_map",
 }
 
 
@@ -70,14 +71,16 @@ class Result:
         Geodesics and Voronoi cells the symmetry extraction needs.
     extraction : Extraction or None
         Symmetries (``symmetries.json``) and the global one.
-    zoomout_map : (N_in,) int64 or None
-        The global symmetry refined by ZoomOut, as the image of every input vertex
-        (``Params.zoomout``); None: :meth:`symmetry_map` is the extraction's.
+    global_map : (N_in,) int64 or None
+        The global symmetry's dense map the run chose among its candidates (seeded
+        ZoomOut's, the extraction's, a spectral one: ``run.json``'s ``global_map``), as the
+        image of every input vertex, -1 where it has no support; None: no global symmetry,
+        or a run without the dense map (:meth:`symmetry_map` is then the extraction's).
     pass_marginals : (P - 1, S, T) float32 or None
         Marginals of the BP passes after the first (``Params.passes``); None for one
         pass. Their unaries follow from ``unary`` (:attr:`passes`).
     map_distortion : (N_in,) float32 or None
-        The local distortion of ``zoomout_map`` at every input vertex
+        The local distortion of ``global_map`` at every input vertex
         (:func:`intrinsym.globalmap.distortion.local_distortion`, sqrt(area) units, NaN where
         unknown), which picks the confidence's calibration table; None without it (a
         result of an earlier version: the first table).
@@ -94,7 +97,7 @@ class Result:
     info: RunInfo
     support: Support | None = None
     extraction: Extraction | None = None
-    zoomout_map: np.ndarray | None = None
+    global_map: np.ndarray | None = None
     pass_marginals: np.ndarray | None = None
     map_distortion: np.ndarray | None = None
 
@@ -168,15 +171,15 @@ class Result:
         support (off its parts; in ``detect``, where the map does not return a vertex to
         itself) and everywhere when there is none.
 
-        The global map the run chose (``zoomout_map``,
+        The global map the run chose (``global_map``,
         :func:`intrinsym.globalmap.globalmap.choose_global_map`) when it made one, else the
         extraction's (:func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`). Needs ``support``
         and ``extraction``.
         """
         if self.support is None or self.extraction is None:
             raise ValueError("the result has no extraction")
-        if self.zoomout_map is not None:
-            return np.asarray(self.zoomout_map, dtype=np.int64)  # supported_map of the run's global map
+        if self.global_map is not None:
+            return np.asarray(self.global_map, dtype=np.int64)  # supported_map of the run's global map
         if self.support.source_mesh_vertices is None or not self.support.self_match:
             return self.extraction_map()  # a match maps onto another shape: no round trip
         return supported_map(self.extraction_map(), self.support.source_mesh_vertices, self.info.resolved.scale)
@@ -248,7 +251,7 @@ class Result:
         (:func:`intrinsym.globalmap.confidence.score`); uncalibrated."""
         mass = self.symmetry_mass() if mass is None else mass
         images = None if self.support is None else self.support.target_mesh_vertices
-        if images is None or self.zoomout_map is None:
+        if images is None or self.global_map is None:
             return np.asarray(mass, dtype=np.float64)
         image, scale = self.symmetry_map(), self.info.resolved.scale
         apart = disagreement(images, image, self.extraction_map(), scale)
@@ -263,8 +266,8 @@ class Result:
         component without samples, carried there), that of the nearest vertex a cell
         holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where the map gives
         no image."""
-        # map_distortion is that of zoomout_map: without it, the map scored is another
-        local = self.map_distortion if self.zoomout_map is not None else None
+        # map_distortion is that of global_map: without it, the map scored is another
+        local = self.map_distortion if self.global_map is not None else None
         conf = calibrated(self.symmetry_score(mass), local)
         if self.support is not None and self.support.source_mesh_vertices is not None:
             conf = carried_confidence(conf, self.support.vertex_source, self.support.source_mesh_vertices)
@@ -334,8 +337,8 @@ class Result:
             arrays.update(self.support.to_arrays())
         if self.extraction is not None:
             arrays.update(self.extraction.to_arrays())
-        if self.zoomout_map is not None:
-            arrays["zoomout_map"] = np.asarray(self.zoomout_map, dtype=np.int64)
+        if self.global_map is not None:
+            arrays["global_map"] = np.asarray(self.global_map, dtype=np.int64)
         if self.pass_marginals is not None:
             arrays["pass_marginals"] = np.asarray(self.pass_marginals, dtype=np.float32)
         if self.map_distortion is not None:
@@ -397,7 +400,7 @@ class Result:
             with np.load(name) as z:
 
                 def get(key: str) -> np.ndarray | None:
-                    for k in (key, V1_ARRAYS.get(key)):
+                    for k in (key, OLD_ARRAYS.get(key)):
                         if k is not None and k in z.files:
                             return z[k]
                     return None
@@ -414,7 +417,7 @@ class Result:
                     if Extraction.stored_in(z.files)
                     else None
                 )
-                zoomout_map, pass_marginals = get("zoomout_map"), get("pass_marginals")
+                global_map, pass_marginals = get("global_map"), get("pass_marginals")
                 map_distortion = get("map_distortion")
         except _UNREADABLE as err:
             reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"
@@ -425,7 +428,7 @@ class Result:
             info=info,
             support=support,
             extraction=extraction,
-            zoomout_map=zoomout_map,
+            global_map=global_map,
             pass_marginals=pass_marginals,
             map_distortion=map_distortion,
         )
@@ -446,7 +449,7 @@ def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
         "unary": (s, t),
         "marginals": (s, t),
         "pass_marginals": ("P", s, t),
-        "zoomout_map": ("N",),
+        "global_map": ("N",),
         "map_distortion": ("N",),
         "edge_length": (e,),
         "vertex_source": ("N",),
@@ -466,7 +469,7 @@ def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
         "symmetry_kind": ("K",),
         "global_index": (),
     }
-    renamed = {**V1_ARRAYS, **Support.OLD_KEYS}
+    renamed = {**OLD_ARRAYS, **Support.OLD_KEYS}
     return shapes | {renamed[key]: shape for key, shape in shapes.items() if key in renamed}
 
 

@@ -4,8 +4,8 @@ BP statistics, the identity decision, the ZoomOut guard, inputs and versions.
 Every record is a frozen dataclass; :meth:`RunInfo.to_dict` / :meth:`RunInfo.from_dict`
 are the JSON form (format :data:`FORMAT_VERSION`; older files load too: version 1, written
 before the field had a version, version 2, whose identity decision recorded the round
-trip alone as ``involution``, dropped on reading, and version 3, whose folder holds no
-extraction).
+trip alone as ``involution``, dropped on reading, version 3, whose folder holds no
+extraction, and version 4, whose ``result.npz`` calls the global map ``zoomout_map``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 #: Version of the result folder's format (``run.json``'s ``format_version``).
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 
 #: What format 3 replaced by the reflection test: the round trip alone (``identity``'s
 #: statistic and threshold, and the parameter), dropped when an older file is read.
