@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,24 @@ def shared(relative: str) -> Path:
     if not path.exists():
         pytest.skip(f"research data not available: {path} (set INTRINSYM_DATA to the research data folder)")
     return path
+
+
+#: The default run's budget (issue 49): the sum of its test durations on a quiet 2-core
+#: machine. Heavier cases are marked ``slow`` and run by CI's ``-m slow`` line.
+BUDGET_S = 90.0
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: pytest.Config) -> None:
+    """Print the run's summed test durations beside the budget (after ``--durations``)."""
+    total = sum(
+        getattr(report, "duration", 0.0)
+        for reports in terminalreporter.stats.values()
+        for report in reports
+        if isinstance(report, pytest.TestReport)
+    )
+    selection = config.option.markexpr or "all"
+    budget = f"budget {BUDGET_S:.0f} s on a quiet 2-core machine" if "not slow" in selection else "no budget"
+    terminalreporter.write_line(f"test durations ({selection}): {total:.1f} s in all; {budget}")
 
 
 # A square pyramid: quad base (0, 1, 2, 3) and apex 4.
@@ -67,6 +87,25 @@ def mirror_shape() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 @pytest.fixture
 def mirror():
     return mirror_shape()
+
+
+#: The command line's small sizes on the shipped example: every run takes seconds.
+CLI_SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
+
+
+@pytest.fixture(scope="session")
+def example_detected(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """``intrinsym detect --example -o OUT --json`` at ``CLI_SMALL``, run once per session
+    as its own process: the result folder and the summary printed on standard output.
+
+    Shared by every test that reads such a result: read it, or copy it
+    (``shutil.copytree``) before writing into it.
+    """
+    out = tmp_path_factory.mktemp("example") / "spot"
+    argv = [sys.executable, "-m", "intrinsym.app.cli", "detect", "--example", "-o", str(out), *CLI_SMALL, "--json"]
+    p = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    return out, p.stdout
 
 
 def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:

@@ -213,6 +213,7 @@ def _wait_for(condition, seconds: float = 180) -> None:
         time.sleep(0.1)
 
 
+@pytest.mark.slow  # a scheduler, a worker and two batch processes started from scratch (CI: -m slow)
 def test_an_interrupted_batch_resumes_on_a_separately_started_scheduler(meshes: Path, tmp_path: Path) -> None:
     """``dask scheduler`` + ``dask worker`` on loopback, ``--scheduler``; SIGINT after the
     first item; the re-run leaves the finished folders untouched and runs the rest."""

@@ -9,10 +9,9 @@ import pytest
 import trimesh
 
 import intrinsym
+from conftest import CLI_SMALL as SMALL
 from intrinsym import params
 from intrinsym.app import cli
-
-SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
 
 
 def run(*args):
@@ -21,11 +20,9 @@ def run(*args):
     )
 
 
-def test_detect_example_writes_result(tmp_path):
-    out = tmp_path / "spot"
-    p = run("detect", "--example", "-o", out, *SMALL, "--json")
-    assert p.returncode == 0, p.stderr
-    summary = json.loads(p.stdout)
+def test_detect_example_writes_result(example_detected):
+    out, stdout = example_detected  # `intrinsym detect --example -o OUT *SMALL --json`
+    summary = json.loads(stdout)
     assert summary["sizes"]["source"] == 30
     assert (out / "result.npz").is_file() and (out / "run.json").is_file()
     with np.load(out / "result.npz") as z:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
@@ -119,6 +120,7 @@ def test_smoothing_leaves_a_coarse_input_alone_and_smooths_a_fine_one(mirror):
     assert np.mean(smoothed_map(surf, noisy, evecs) == sym) > 0.95
 
 
+@pytest.mark.slow  # a whole default detect of a TOSCA pose: a benchmark regression (CI runs it with -m slow)
 def test_a_tail_on_the_mirror_plane_maps_onto_itself():
     """TOSCA cat1 against its symmetry file: the tail lies on the mirror plane, inside the
     removed trivial disc, so BP sends four of its five samples up the tail; the trimmed

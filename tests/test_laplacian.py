@@ -69,9 +69,10 @@ def test_two_grid_matches_the_direct_solve_on_a_figure():
 
 
 def test_eigenpairs_decimates_only_large_meshes_with_room_for_the_pairs():
-    v, f = unit_sphere(5)  # 10,242 vertices
-    k = 16
+    v, f = unit_sphere(4)  # 2,562 vertices: more than FINE_PER_COARSE times `enough` (1,120)
+    k = 8
     enough = COARSE_PER_PAIR * (k + COARSE_EXTRA)
+    assert len(v) > FINE_PER_COARSE * enough
     direct = eigenpairs(v, f, k)[0]
     # no more than FINE_PER_COARSE times the coarse size, too few coarse vertices per pair, a point
     # cloud, no coarse size: solved directly
@@ -118,6 +119,7 @@ def test_several_components_give_one_constant_and_the_union_of_the_spectra(copie
     np.testing.assert_allclose(evecs[:, 0], evecs[0, 0])  # the constant function, on every copy
 
 
+@pytest.mark.slow  # a direct solve of 40 pairs on 27,000 vertices (CI: -m slow)
 def test_two_grid_on_several_components_matches_the_direct_solve():
     g = shapes.figure(30)
     v, f = _copies(g.vertices, g.faces, 2)

@@ -100,6 +100,7 @@ def test_shrec16_truth_on_the_data():
     assert one_side.unit == truth.unit or one_side.unit > 0
 
 
+@pytest.mark.slow  # a detect of a real scan in its own process (CI: -m slow)
 def test_evaluate_scores_a_shrec16_truth(tmp_path):
     mesh = shared("shrec16_partial/cuts/cuts_horse_shape_15.off")
     out = tmp_path / "out"

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 import intrinsym
+from conftest import CLI_SMALL as SMALL
 from intrinsym import files, pipeline, resources
 from intrinsym.app import cli
 from intrinsym.errors import OutputError, ResultError
 
-SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
 SRC = Path(intrinsym.__file__).parent
 
 
@@ -40,11 +40,10 @@ def no_work(monkeypatch):
     monkeypatch.setattr(pipeline, "match", refuse)
 
 
-@pytest.fixture(scope="module")
-def result_dir(tmp_path_factory):
-    out = tmp_path_factory.mktemp("res") / "out"
-    assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL]) == 0
-    return out
+@pytest.fixture
+def result_dir(example_detected):
+    """The session's ``intrinsym detect --example`` result at ``SMALL`` (conftest): read or copied, never written."""
+    return example_detected[0]
 
 
 @pytest.mark.parametrize("where", ["file", "below_file", "unwritable"])
