@@ -38,6 +38,9 @@ from intrinsym.mesh import generated as shapes
 TINY = {"n_source": 20, "n_target": 200, "spin_cloud": 2000, "iterations": 5}
 TINY_FLAGS = ["--source", "20", "--target", "200", "--spin-cloud", "2000", "--iterations", "5"]
 PARAMS = Params(**TINY)
+#: The tests on the module's LocalCluster of two worker processes: CI runs them (-m slow); the
+#: default run's end-to-end batch is tests/test_examples.py's batch_folder.py.
+CLUSTER = pytest.mark.slow
 #: Environment of every process started here: one thread each (two cores in CI).
 ONE_THREAD = engine.thread_environment(1)
 
@@ -91,6 +94,7 @@ def test_a_manifest_cell_that_is_no_value_names_the_file_and_column(tmp_path: Pa
         items.read_manifest(str(tmp_path / "bad.csv"))
 
 
+@CLUSTER
 def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path, meshes: Path, tmp_path: Path) -> None:
     out, frame = by_path
     assert sorted(frame["name"]) == ["broken", "cubo", "spot", "star"]
@@ -141,6 +145,7 @@ def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path,
     assert list(on_disk["name"]) == list(frame["name"])
 
 
+@CLUSTER
 def test_a_rerun_skips_what_is_done_and_new_parameters_recompute(
     by_path, meshes: Path, cluster, tmp_path: Path
 ) -> None:
@@ -160,6 +165,7 @@ def test_a_rerun_skips_what_is_done_and_new_parameters_recompute(
     assert list(changed["status"]) == ["done"] and _mtimes(out / "star") != before
 
 
+@CLUSTER
 def test_bytes_transport_gives_the_same_result(by_path, meshes: Path, cluster, tmp_path: Path) -> None:
     out, _ = by_path
     frame = intrinsym.batch(
@@ -180,6 +186,7 @@ def read_scores(folder: Path) -> dict:
     return json.loads((folder / "scores.json").read_text())
 
 
+@CLUSTER
 def test_a_killed_worker_s_item_runs_again_and_is_reported_once(meshes: Path, cluster, tmp_path: Path) -> None:
     killed: list[str] = []
 
@@ -285,6 +292,7 @@ def test_an_interrupted_batch_resumes_on_a_separately_started_scheduler(meshes: 
                 process.wait(30)
 
 
+@CLUSTER
 def test_pairs_mode_matches_the_horse_frames(cluster, tmp_path: Path) -> None:
     frames = [str(shared(f"sumner_horse/horse-0{i}.obj")) for i in (1, 2)]
     frame = intrinsym.batch(frames, tmp_path, PARAMS, pairs=True, scheduler=cluster.scheduler_address)
@@ -295,6 +303,7 @@ def test_pairs_mode_matches_the_horse_frames(cluster, tmp_path: Path) -> None:
     assert (run.mode, run.input, run.target_input) == ("match", frames[1], frames[0])
 
 
+@CLUSTER
 def test_report_prints_the_aggregate_and_writes_the_plot(by_path, capsys: pytest.CaptureFixture) -> None:
     out, _ = by_path
     assert main(["batch", "--report", "-o", str(out), "--json"]) == 0
@@ -432,6 +441,7 @@ def test_a_bad_workers_or_scheduler_value_is_a_one_line_error_before_out(
 
 
 @pytest.mark.parametrize("summary", ["kept", "lost"])
+@CLUSTER
 def test_a_finished_item_with_a_corrupt_map_or_confidence_runs_again(
     by_path, meshes: Path, cluster, tmp_path: Path, summary: str
 ) -> None:

@@ -69,7 +69,7 @@ def test_detect_trivial_weight(tmp_path):
     assert p.returncode == 2 and "unrecognized arguments: --trivial-weight" in p.stderr
 
 
-def test_evaluate_command(tmp_path, mirror):
+def test_evaluate_command(tmp_path, mirror, capsys):
     v, f, sym = mirror
     mesh_path = tmp_path / "m.off"
     with open(mesh_path, "w") as fh:
@@ -87,20 +87,24 @@ def test_evaluate_command(tmp_path, mirror):
     assert scores["truth_distortion"]["above_0.05"] == 0.0 and scores["truth_distortion"]["n_pairs"] > 0
     assert scores["map"]["distortion"]["above_0.05"] <= 1.0
     assert json.loads((out / "scores.json").read_text()) == scores
-    p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy")
-    assert p.returncode == 0 and "ground truth 0.000" in p.stdout
+    capsys.readouterr()
+    # the text report, in this process (the command's own process ran above)
+    assert cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "sym.npy")]) == 0
+    text = capsys.readouterr().out
+    assert "ground truth 0.000" in text
     area = scores["map"]["area_within_0.05"], scores["map"]["area_within_0.10"]
-    assert f"(of the area {area[0]:.3f} / {area[1]:.3f})" in p.stdout
+    assert f"(of the area {area[0]:.3f} / {area[1]:.3f})" in text
     # the confidence of symmetry_confidence.npy against the truth
     c = scores["confidence"]
     assert c["within"] == scores["map"]["within_0.05"] and 0.0 <= c["expected_calibration_error"] <= 1.0
     assert c["confidence"] == pytest.approx(float(np.load(out / "symmetry_confidence.npy").mean()))
-    assert f"expected calibration error {c['expected_calibration_error']:.3f}" in p.stdout
+    assert f"expected calibration error {c['expected_calibration_error']:.3f}" in text
     # a confidence file of another mesh: one line, exit 2, the earlier scores kept
     np.save(out / "symmetry_confidence.npy", np.zeros(5, dtype=np.float32))
-    p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy")
-    assert p.returncode == 2 and p.stderr.count("\n") == 1, p.stderr
-    assert "symmetry_confidence.npy: 5 confidences, the mesh has" in p.stderr
+    code = cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "sym.npy")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "symmetry_confidence.npy: 5 confidences, the mesh has" in err
     assert json.loads((out / "scores.json").read_text()) == scores
 
 

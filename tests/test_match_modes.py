@@ -51,6 +51,7 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
+@pytest.mark.slow  # two matches at 150 / 1500, the size its shares were measured at (CI: -m slow)
 def test_half_of_spot_matches_spot_within_005():
     """Spot with its half below z = 0 cut away, matched to spot: within 0.05 sqrt(area)
     of its true point or of its mirror point (geodesic) on most vertices in the common
