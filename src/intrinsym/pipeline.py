@@ -508,7 +508,7 @@ def prepare(
 
     Cleaned (duplicate vertices merged; degenerate and duplicate faces and unreferenced
     vertices dropped), centred, normalised to unit surface area, midpoint-subdivided
-    while it has fewer than ``2 max(n_source, n_target)`` vertices (a mesh; a point cloud
+    while it has fewer than ``WORK_PER_SAMPLE max(n_source, n_target)`` vertices (a mesh; a point cloud
     is never subdivided), with its geodesic graph and normals: what :func:`detect` does
     before sampling. ``detect(prepare(shape, p), p)`` equals ``detect(shape, p)`` exactly,
     so a parameter sweep prepares once.

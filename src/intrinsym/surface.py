@@ -49,8 +49,8 @@ class Surface:
     normals : (N, 3) float64
     min_vertices : int
         The working size it was prepared for: a mesh with fewer vertices is subdivided
-        until it has this many (2 max(n_source, n_target) of the parameters it was
-        prepared with, :func:`intrinsym.prepare`).
+        until it has this many (``WORK_PER_SAMPLE`` max(n_source, n_target) of the
+        parameters it was prepared with, :func:`intrinsym.prepare`).
     subdivided : bool
         Whether the cleaned mesh was subdivided to reach it.
     """
