@@ -123,7 +123,15 @@ def example_path() -> Path:
     return Path(str(importlib.resources.files("intrinsym") / "data" / "spot.obj"))
 
 
-from .errors import InputError, IntrinsymError, ParameterError, ResourceError  # noqa: E402
+from .errors import (  # noqa: E402
+    InputError,
+    IntrinsymError,
+    MissingExtraError,
+    OutputError,
+    ParameterError,
+    ResourceError,
+    ResultError,
+)
 from .evaluation import MapScores, MarginalScores, load_symmetry_map, score_map, score_marginals  # noqa: E402
 from .extract import Extraction, ExtractParams, Symmetry  # noqa: E402
 from .globalmap import DistortionScores, map_distortion  # noqa: E402
@@ -154,10 +162,13 @@ __all__ = [
     "IntrinsymError",
     "MapScores",
     "MarginalScores",
+    "MissingExtraError",
+    "OutputError",
     "ParameterError",
     "Params",
     "ResourceError",
     "Result",
+    "ResultError",
     "RunInfo",
     "Shape",
     "StageDone",
