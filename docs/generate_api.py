@@ -30,8 +30,7 @@ SECTIONS: list[tuple[str, str, list[str]]] = [
     ),
     (
         "Parameters",
-        "Every parameter of the pipeline; the same table with the command-line flags and the "
-        "paper's values: [parameters.md](parameters.md).",
+        "Every parameter of the pipeline; with their command-line flags, by stage: [parameters.md](parameters.md).",
         ["Params", "make_params", "ExtractParams"],
     ),
     (
@@ -180,16 +179,6 @@ def _own_members(cls: type) -> list[tuple[str, Any]]:
     return sorted(found.items())
 
 
-def _params_table() -> list[str]:
-    """Every ``Params`` field with its type, default and help (the field's metadata)."""
-    lines = ["| field | type | default | meaning |", "|---|---|---|---|"]
-    for f in dataclasses.fields(intrinsym.Params):
-        help_text = f.metadata.get("help", "")
-        cells = [f"`{f.name}`", f"`{f.type}`", f"`{_default(f.default)}`", help_text]
-        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-    return lines
-
-
 def document(name: str) -> list[str]:
     """The page's entry for ``intrinsym.NAME``."""
     obj = getattr(intrinsym, name)
@@ -200,8 +189,6 @@ def document(name: str) -> list[str]:
         return lines
     if inspect.isclass(obj):
         lines += ["```python", "class " + signature(obj, name), "```", "", markdown(obj.__doc__), ""]
-        if obj is intrinsym.Params:
-            lines += ["**Fields**", "", *_params_table(), ""]
         for member, value in _own_members(obj):
             if isinstance(value, property):
                 lines += [f"#### `{name}.{member}` (property)", "", markdown(value.__doc__), ""]

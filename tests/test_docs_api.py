@@ -52,9 +52,9 @@ def test_every_public_name_has_an_entry(page: str) -> None:
 
 def test_every_params_field_is_documented(page: str) -> None:
     for field in dataclasses.fields(intrinsym.Params):
-        row = next((line for line in page.splitlines() if line.startswith(f"| `{field.name}` |")), None)
-        assert row is not None, f"Params.{field.name} has no row in docs/api.md"
-        assert field.metadata["help"].replace("|", "\\|") in row, f"Params.{field.name}: its help is not in its row"
+        entry = next((line for line in page.splitlines() if line.startswith(f"- `{field.name}` (")), None)
+        assert entry is not None, f"Params.{field.name} has no entry in docs/api.md"
+        assert field.metadata["help"] in entry, f"Params.{field.name}: its help is not in its entry"
 
 
 def test_every_result_member_is_documented(page: str) -> None:

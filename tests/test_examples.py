@@ -57,7 +57,6 @@ def test_your_mesh_writes_a_coloured_ply(tmp_path: Path) -> None:
     assert vertex_map.shape == (len(example.vertices),) and (vertex_map >= 0).mean() > 0.8
 
 
-@pytest.mark.skipif(not hasattr(intrinsym, "prepare"), reason="intrinsym.prepare is not public yet")
 def test_parameter_sweep_reuses_one_surface(tmp_path: Path) -> None:
     out = run_example("parameter_sweep.py", "--small", cwd=tmp_path)
     lines = out.strip().splitlines()
