@@ -7,6 +7,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+# One OpenBLAS thread for the run and the processes it starts (before NumPy and SciPy
+# load the library, which reads it once): on two cores its threads spin against each
+# other and against the Numba workers, and the small problems of the tests gain nothing
+# from them (a spot detect at 20 / 200: descriptors 1.4-4.5 s -> 0.5 s on a loaded
+# machine). A value the caller set is kept.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 import pytest
 import trimesh

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from conftest import CLI_SMALL
+
 SRC = Path(__file__).resolve().parents[1] / "src" / "intrinsym"
 #: Front ends: the stages (everything else) never import these.
 FRONT_END_PACKAGE = "intrinsym.app"
@@ -146,7 +148,7 @@ def test_a_core_install_detects_and_names_each_missing_extra_in_one_line(tmp_pat
     def run(*argv: str) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=tmp_path)
 
-    done = run("detect", "--example", "--source", "40", "--target", "400", "-o", "spot", "--quiet")
+    done = run("detect", "--example", *CLI_SMALL, "-o", "spot", "--quiet")
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "spot" / "symmetry_map.npy").is_file()
     for argv, what, extra in [

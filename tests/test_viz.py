@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+import trimesh
 from matplotlib.image import imread
 
 from conftest import sphere_result
@@ -227,9 +228,14 @@ def test_progress_keeps_stage_lines_and_shows_bp_iterations_transiently():
 
 
 def test_detect_with_figures_and_no_progress_when_stderr_is_not_a_terminal(tmp_path):
+    # a 320-triangle ellipsoid: the figures draw the input mesh, each panel every triangle
+    # (the example's 5,856 in 8 panels of 9 figures took most of this test's 10 s)
+    path = tmp_path / "ellipsoid.off"
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    trimesh.Trimesh(sphere.vertices * [1.5, 1.0, 0.6], sphere.faces, process=False).export(path)
     p = run(
         "detect",
-        "--example",
+        path,
         "-o",
         tmp_path / "o",
         "--source",
