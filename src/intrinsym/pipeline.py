@@ -3,10 +3,11 @@ extraction -> global map.
 
 :func:`detect` matches a shape to itself (partial intrinsic symmetries); :func:`match`
 matches shape A to shape B (the paper's ambiguous two-shape case). Both return a
-:class:`~intrinsym.result.result.Result`. The steps between (:func:`source_graph`,
-:func:`pairwise_model`, :func:`unary_model`, :func:`solve_bp`, :func:`extraction_support`,
-:func:`extract_symmetries`, :func:`intrinsym.globalmap.globalmap.choose_global_map`) each take and
-return arrays and can run alone.
+:class:`~intrinsym.result.result.Result`. The steps between (:func:`pairwise_model`,
+:func:`unary_model`, :func:`solve_bp`, :func:`extraction_support`,
+:func:`extract_symmetries`, :func:`intrinsym.globalmap.globalmap.choose_global_map`) can run
+alone: they take the sampled problem (:class:`intrinsym.problem.Problem`, from
+:func:`intrinsym.problem.sampled`) or arrays, and return arrays.
 """
 
 from __future__ import annotations
@@ -27,10 +28,10 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .mesh import sampling
 from .mesh.shape import surface_area
 from .mrf import bp, model
 from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, PARTIAL_AREA, WORK_PER_SAMPLE, Params, make_params
+from .problem import Problem, sampled
 from .progress import BPIteration, ProgressCallback, StageDone
 from .result.result import Result
 from .result.runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStats, Resolved, RunInfo, Sizes, versions
@@ -63,15 +64,6 @@ def _model_bytes(n_s: int, n_t: int, n_edges: int, itemsize: int, passes: int = 
     return (6 + 2 * (passes - 1)) * n_s * n_t * 4 + 2 * n_edges * n_t * itemsize
 
 
-def source_graph(src: Surface, ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The source graph: (E, 2) int64 edges between samples with adjacent geodesic
-    Voronoi cells, and their (E,) geodesic lengths."""
-    edges = geodesics.voronoi_adjacency(src.graph, ps)
-    if len(edges) == 0:
-        raise ParameterError(f"{src.shape.path or 'shape'}: the source samples form no neighbourhood graph")
-    return edges, geodesics.pair_distances(src.graph, ps[edges])
-
-
 @dataclass(frozen=True)
 class Pairwise:
     """The pairwise term (Eq. 6) in normalised units.
@@ -92,23 +84,19 @@ class Pairwise:
     targets: geodesics.SparseDistances
 
 
-def pairwise_model(
-    src: Surface, tgt: Surface, pt: np.ndarray, edge_length: np.ndarray, p: Params, t_spacing: float, n_passes: int
-) -> Pairwise:
+def pairwise_model(problem: Problem, p: Params, n_passes: int) -> Pairwise:
     """lambda from ``p.tolerance`` target spacings (or ``p.lam``) and the target rings."""
     if p.lam is not None:
-        lam = p.lam * src.scale**2
+        lam = p.lam * problem.src.scale**2
     else:
-        lam = model.lambda_for_tolerance(p.tolerance * t_spacing, p.rho)
+        lam = model.lambda_for_tolerance(p.tolerance * problem.t_spacing, p.rho)
     delta = model.truncation_width(lam, p.rho)
-    ring = float(edge_length.max() + delta)
-    targets = geodesics.local_distances(tgt.graph, pt, max(ring, p.pass_radius) if n_passes > 1 else ring)
-    return Pairwise(lam, delta, targets)
+    ring = float(problem.edge_length.max() + delta)
+    radius = max(ring, p.pass_radius) if n_passes > 1 else ring
+    return Pairwise(lam, delta, geodesics.local_distances(problem.tgt.graph, problem.pt, radius))
 
 
-def unary_model(
-    src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params, self_match: bool, t_spacing: float
-) -> tuple[np.ndarray, float, np.ndarray | None, tuple | None]:
+def unary_model(problem: Problem, p: Params) -> tuple[np.ndarray, float, np.ndarray | None, tuple | None]:
     """The unary potentials before the trivial match is weakened.
 
     Returns
@@ -123,12 +111,13 @@ def unary_model(
     spectra : pair of (eigenvalues, eigenvectors) or None
         Of source and target (:func:`intrinsym.unary.unary.spectra`).
     """
-    spectra = unary.spectra(src, tgt, p, self_match)
-    trivial = self_match and p.remove_trivial and p.trivial_radius > 0
+    src, tgt, ps, pt, t_spacing = problem.src, problem.tgt, problem.ps, problem.pt, problem.t_spacing
+    spectra = unary.spectra(src, tgt, p, problem.self_match)
+    trivial = problem.self_match and p.remove_trivial and p.trivial_radius > 0
     reach = max(
         (OFFSET_TARGETS + 2) * t_spacing if unary.offset_calibrated(p) else 0.0, p.trivial_radius if trivial else 0.0
     )
-    near = unary.near_targets(src, ps, pt, reach) if self_match and reach > 0 else None
+    near = unary.near_targets(src, ps, pt, reach) if problem.self_match and reach > 0 else None
     phi, floor = unary.unary_potentials(src, tgt, ps, pt, p, spectra, t_spacing, near)
     return phi, floor, near, spectra
 
@@ -215,62 +204,36 @@ def solve_bp(
     return BPOutcome(first_unary, marginals, passes, runs, IdentityDecision(weight) if trivial else None)
 
 
-def extraction_support(
-    src: Surface,
-    tgt: Surface,
-    ps: np.ndarray,
-    pt: np.ndarray,
-    pair: Pairwise,
-    edge_length: np.ndarray,
-    self_match: bool,
-) -> Support:
+def extraction_support(problem: Problem, pair: Pairwise) -> Support:
     """The extraction's support: Voronoi cells of the samples and the target geodesics."""
+    src, tgt = problem.src, problem.tgt
     return Support(
-        edge_length=edge_length,
+        edge_length=problem.edge_length,
         targets=pair.targets,
-        vertex_source=geodesics.voronoi_cells(src.graph, ps)[src.vertex_map],
-        vertex_target=geodesics.voronoi_cells(tgt.graph, pt)[tgt.vertex_map],
-        self_match=self_match,
+        vertex_source=geodesics.voronoi_cells(src.graph, problem.ps)[src.vertex_map],
+        vertex_target=geodesics.voronoi_cells(tgt.graph, problem.pt)[tgt.vertex_map],
+        self_match=problem.self_match,
         source_mesh_vertices=src.input_vertices,
         target_mesh_vertices=tgt.input_vertices,
     )
 
 
-def extract_symmetries(
-    src: Surface,
-    tgt: Surface,
-    ps: np.ndarray,
-    pt: np.ndarray,
-    edges: np.ndarray,
-    support: Support,
-    outcome: BPOutcome,
-    p: Params,
-) -> Extraction:
+def extract_symmetries(problem: Problem, support: Support, outcome: BPOutcome, p: Params) -> Extraction:
     """The symmetries of all passes of a BP outcome."""
     no_partner = outcome.identity is not None and outcome.identity.weight > 0
     return extract_from_support(
         outcome.marginals,
-        edges,
+        problem.edges,
         support,
-        src.shape.vertices[ps],
-        tgt.shape.vertices[pt],
+        problem.source_points,
+        problem.target_points,
         p.extraction(no_partner),
         unary=outcome.unary,
         passes=outcome.passes,
     )
 
 
-def decide_identity(
-    edges: np.ndarray,
-    edge_length: np.ndarray,
-    pair: Pairwise,
-    outcome: BPOutcome,
-    p: Params,
-    t_spacing: float,
-    src: Surface,
-    ps: np.ndarray,
-    pt: np.ndarray,
-) -> IdentityDecision:
+def decide_identity(problem: Problem, pair: Pairwise, outcome: BPOutcome, p: Params) -> IdentityDecision:
     """The decision of ``trivial_weight="auto"`` on an identity-removed BP outcome: the
     weight the trivial match gets (0: a global symmetry, ``NO_PARTNER_WEIGHT``: partial).
 
@@ -281,13 +244,15 @@ def decide_identity(
     fewer, but a reflection's argmax still acts as one at most samples (its own inverse,
     the surface's orientation reversed: :func:`intrinsym.extract.reflection.reflection`), which
     an invented self-map does not: either test makes the symmetry global. Self-matching:
-    ``ps`` and ``pt`` are working vertices of ``src``.
+    both sample sets lie on ``problem.src``.
     """
     image = outcome.marginals.argmax(axis=1)
-    graph = SourceGraph.from_edges(edges, edge_length, len(outcome.marginals))
-    kept = consistency(image, graph, pair.targets, max(p.d_error, t_spacing))
-    vertices, normals = src.shape.vertices, src.normals
-    acts = reflection(image, edges, vertices[ps], vertices[pt], normals[ps], normals[pt], RETURN_RADIUS)
+    graph = SourceGraph.from_edges(problem.edges, problem.edge_length, len(outcome.marginals))
+    kept = consistency(image, graph, pair.targets, max(p.d_error, problem.t_spacing))
+    normals, ps, pt = problem.src.normals, problem.ps, problem.pt
+    acts = reflection(
+        image, problem.edges, problem.source_points, problem.target_points, normals[ps], normals[pt], RETURN_RADIUS
+    )
     partial = kept < p.isometry_threshold and acts < p.reflection_threshold
     return IdentityDecision(
         NO_PARTNER_WEIGHT if partial else 0.0,
@@ -316,43 +281,32 @@ def _bp_stats(runs: list[bp.BPResult]) -> BPStats:
 
 
 def _global_map(
-    src: Surface,
-    tgt: Surface,
-    ps: np.ndarray,
-    pt: np.ndarray,
-    support: Support,
-    edges: np.ndarray,
-    spectra: tuple | None,
-    t_spacing: float,
-    source_vertex: np.ndarray,
-    self_match: bool,
-    clock: _Clock,
-    outcome: BPOutcome,
-    p: Params,
+    problem: Problem, support: Support, spectra: tuple | None, clock: _Clock, outcome: BPOutcome, p: Params
 ) -> tuple[Extraction, GlobalMap | None, np.ndarray | None]:
     """The symmetries of a BP outcome, and (self-matching, when one is global) the global
     map :func:`choose_global_map` chooses with its local distortion."""
-    extraction = extract_symmetries(src, tgt, ps, pt, edges, support, outcome, p)
+    extraction = extract_symmetries(problem, support, outcome, p)
     clock.lap("extract")
-    if not self_match or extraction.global_symmetry is None:
+    if not problem.self_match or extraction.global_symmetry is None:
         return extraction, None, None
+    src, tgt = problem.src, problem.tgt
     fit = (
-        edges,
-        src.to_input(src.shape.vertices[ps]),
-        tgt.to_input(tgt.shape.vertices[pt]),
-        tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
+        problem.edges,
+        src.to_input(problem.source_points),
+        tgt.to_input(problem.target_points),
+        problem.target_vertex,
     )
     chosen = choose_global_map(
         src,
-        ps,
-        pt,
-        source_vertex,
+        problem.ps,
+        problem.pt,
+        problem.source_vertex,
         outcome.marginals,
         extraction.global_symmetry,
         support,
         None if spectra is None else spectra[0],
         fit,
-        t_spacing,
+        problem.t_spacing,
         p,
         device=outcome.runs[0].backend,  # the GPU that ran BP runs the dense searches
     )
@@ -362,36 +316,32 @@ def _global_map(
     return extraction, chosen, map_distortion
 
 
-def _solve(
-    src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params, clock: _Clock, self_match: bool, header: dict
-) -> Result:
+def _solve(problem: Problem, p: Params, clock: _Clock, header: dict) -> Result:
     """Stages shared by detect and match, from the samples onwards; ``header`` holds
     :class:`RunInfo`'s mode, inputs and preset."""
-    t_spacing = p.target_spacing or sampling.spacing_for_count(1.0, len(pt))
-    edges, edge_length = source_graph(src, ps)
+    src, tgt, ps, pt, edges = problem.src, problem.tgt, problem.ps, problem.pt, problem.edges
+    self_match = problem.self_match
     n_passes = p.passes if p.passes is not None else 1 if self_match else 2
     resources.check_memory(
         _model_bytes(len(ps), len(pt), len(edges), np.dtype(p.dtype).itemsize, n_passes), "the model", src.shape.path
     )
-    pair = pairwise_model(src, tgt, pt, edge_length, p, t_spacing, n_passes)
+    pair = pairwise_model(problem, p, n_passes)
     clock.lap("geodesics")
-    phi, floor, near, spectra = unary_model(src, tgt, ps, pt, p, self_match, t_spacing)
+    phi, floor, near, spectra = unary_model(problem, p)
     clock.lap("descriptors")
-    mrf = model.MRF(phi.astype(np.float32), edges, edge_length, pair.targets, pair.lam, p.rho)
+    mrf = model.MRF(phi.astype(np.float32), edges, problem.edge_length, pair.targets, pair.lam, p.rho)
     clock.lap("unary")
     outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
     unsure = False
     if outcome.identity is not None and p.trivial_weight == "auto":
-        identity = decide_identity(edges, edge_length, pair, outcome, p, t_spacing, src, ps, pt)
+        identity = decide_identity(problem, pair, outcome, p)
         if identity.weight > 0:
             outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)
         outcome = dataclasses.replace(outcome, identity=identity)
         unsure = identity.weight == 0 and identity.isometry is not None and identity.isometry < p.isometry_threshold
     clock.lap("bp")
-    support = extraction_support(src, tgt, ps, pt, pair, edge_length, self_match)
-    source_vertex = src.nearest_input_vertex(src.shape.vertices[ps])
-    models = (src, tgt, ps, pt, support, edges, spectra, t_spacing, source_vertex, self_match, clock)
-    extraction, chosen, map_distortion = _global_map(*models, outcome, p)
+    support = extraction_support(problem, pair)
+    extraction, chosen, map_distortion = _global_map(problem, support, spectra, clock, outcome, p)
     if unsure and map_distortion is not None and p.unsure_radius > 1:
         # The global symmetry rests on the reflection test alone: a slide of the identity
         # just past the trivial radius can pass it too. BP again with a wider radius, and
@@ -399,13 +349,13 @@ def _solve(
         wider = dataclasses.replace(p, trivial_radius=p.trivial_radius * p.unsure_radius)
         near_wider = unary.near_targets(src, ps, pt, wider.trivial_radius)
         second = solve_bp(mrf, phi, floor, near_wider, wider, self_match, n_passes, clock.progress)
-        decision = decide_identity(edges, edge_length, pair, second, wider, t_spacing, src, ps, pt)
+        decision = decide_identity(problem, pair, second, wider)
         clock.lap("bp")
         now = float(np.nanmean(map_distortion))
         then: float | None = None
         kept = False
         if decision.weight == 0:
-            found = _global_map(*models, second, wider)
+            found = _global_map(problem, support, spectra, clock, second, wider)
             if found[2] is not None:
                 then = float(np.nanmean(found[2]))
                 kept = then < now
@@ -433,7 +383,7 @@ def _solve(
         lambda_normalised=pair.lam,
         lambda_input_units=pair.lam / src.scale**2,
         delta=pair.delta,
-        target_spacing=t_spacing,
+        target_spacing=problem.t_spacing,
         target_radius=pair.targets.radius,
         unary_floor=floor,
         scale=src.scale,
@@ -451,10 +401,10 @@ def _solve(
         versions=versions(),
     )
     return Result(
-        source_points=src.to_input(src.shape.vertices[ps]),
-        target_points=tgt.to_input(tgt.shape.vertices[pt]),
-        source_point_vertex=source_vertex,
-        target_point_vertex=tgt.nearest_input_vertex(tgt.shape.vertices[pt]),
+        source_points=src.to_input(problem.source_points),
+        target_points=tgt.to_input(problem.target_points),
+        source_point_vertex=problem.source_vertex,
+        target_point_vertex=problem.target_vertex,
         edges=edges.astype(np.int64),
         unary=outcome.unary,
         marginals=outcome.marginals,
@@ -592,7 +542,7 @@ def detect(
     ps, pt = sample_pair(surf, surf, p)
     clock.lap("sampling")
     header = {"mode": "detect", "input": str(surf.shape.path), "preset": preset}
-    return _solve(surf, surf, ps, pt, p, clock, True, header)
+    return _solve(sampled(surf, surf, ps, pt, p, True), p, clock, header)
 
 
 def match(
@@ -628,7 +578,7 @@ def match(
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")
     header = {"mode": "match", "input": str(sa.path), "target_input": str(sb.path), "preset": preset}
-    return _solve(surf_a, surf_b, ps, pt, p, clock, False, header)
+    return _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, header)
 
 
 def extract_result(result: Result) -> Extraction:
