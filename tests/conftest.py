@@ -96,6 +96,25 @@ def mirror():
     return mirror_shape()
 
 
+def cli_run(capsys: pytest.CaptureFixture[str], *args: object) -> subprocess.CompletedProcess:
+    """``intrinsym ARGS`` in this process, as a process would end: the exit code
+    (``cli.main``'s, or an argument error's SystemExit), standard output and error.
+
+    For the tests of what a command prints and returns; each of test_cli, test_cli_help
+    and test_viz keeps a test that starts its own process (about 1 s each: the imports).
+    """
+    from intrinsym.app import cli
+
+    argv = [str(a) for a in args]
+    capsys.readouterr()
+    try:
+        code = cli.main(argv)
+    except SystemExit as stop:
+        code = stop.code
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(argv, code, out, err)
+
+
 #: The command line's small sizes on the shipped example: every run takes seconds.
 CLI_SMALL = ["--source", "30", "--target", "300", "--spin-cloud", "5000", "--iterations", "5"]
 

@@ -10,6 +10,7 @@ import trimesh
 
 import intrinsym
 from conftest import CLI_SMALL as SMALL
+from conftest import cli_run
 from intrinsym import params
 from intrinsym.app import cli
 
@@ -32,7 +33,7 @@ def test_detect_example_writes_result(example_detected):
     assert summary["global_confidence"] == pytest.approx(np.load(out / "symmetry_confidence.npy").mean())
 
 
-def test_detect_trivial_weight(tmp_path):
+def test_detect_trivial_weight(tmp_path, capsys):
     out = tmp_path / "spot"
     assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
     run_json = json.loads((out / "run.json").read_text())
@@ -60,12 +61,12 @@ def test_detect_trivial_weight(tmp_path):
     identity = json.loads((out / "run.json").read_text())["identity"]
     assert identity["isometry"] < 1.0 and identity["reflection"] < 1.0
     assert identity["weight"] == intrinsym.params.NO_PARTNER_WEIGHT
-    p = run("detect", "--example", "-o", tmp_path / "bad", "--trivial-weight", "some")
+    p = cli_run(capsys, "detect", "--example", "-o", tmp_path / "bad", "--trivial-weight", "some")
     assert p.returncode == 2 and "expected 'auto' or a number, got 'some'" in p.stderr
     assert not (tmp_path / "bad").exists()
     # match has no trivial match to weigh
     spot = intrinsym.example_path()
-    p = run("match", spot, spot, "-o", tmp_path / "m", "--trivial-weight", "0.5")
+    p = cli_run(capsys, "match", spot, spot, "-o", tmp_path / "m", "--trivial-weight", "0.5")
     assert p.returncode == 2 and "unrecognized arguments: --trivial-weight" in p.stderr
 
 
@@ -118,11 +119,11 @@ def test_evaluate_command(tmp_path, mirror, capsys):
         ("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 100000000000000000000\n", "huge.off", "out of range"),
     ],
 )
-def test_bad_input_is_one_line_exit_2_no_output(tmp_path, content, name, match):
+def test_bad_input_is_one_line_exit_2_no_output(tmp_path, capsys, content, name, match):
     path = tmp_path / name
     path.write_text(content)
     out = tmp_path / "out"
-    p = run("detect", path, "-o", out)
+    p = cli_run(capsys, "detect", path, "-o", out)
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1, p.stderr
@@ -131,19 +132,20 @@ def test_bad_input_is_one_line_exit_2_no_output(tmp_path, content, name, match):
     assert not out.exists()
 
 
-def test_a_thin_needle_runs(tmp_path):
+def test_a_thin_needle_runs(tmp_path, capsys):
     # its spin images are all alike: the unary's width was 0 and the potentials NaN
     path = tmp_path / "needle.off"
     trimesh.creation.cylinder(radius=1e-6, height=1, sections=16).export(path)
-    p = run("detect", path, "-o", tmp_path / "out", "-q", "--source", "30", "--target", "300", "--iterations", "5")
+    sizes = ["--source", "30", "--target", "300", "--iterations", "5"]
+    p = cli_run(capsys, "detect", path, "-o", tmp_path / "out", "-q", *sizes)
     assert p.returncode == 0 and "Traceback" not in p.stderr, p.stderr
     assert (tmp_path / "out" / "symmetry_map.npy").is_file()
 
 
-def test_missing_file_and_bad_parameters(tmp_path):
-    p = run("detect", tmp_path / "nope.off", "-o", tmp_path / "o")
+def test_missing_file_and_bad_parameters(tmp_path, capsys):
+    p = cli_run(capsys, "detect", tmp_path / "nope.off", "-o", tmp_path / "o")
     assert p.returncode == 2 and "nope.off" in p.stderr and "Traceback" not in p.stderr
-    p = run("detect", "--example", "-o", tmp_path / "o", "--rho", "2")
+    p = cli_run(capsys, "detect", "--example", "-o", tmp_path / "o", "--rho", "2")
     assert p.returncode == 2 and "rho" in p.stderr
     assert not (tmp_path / "o").exists()
 

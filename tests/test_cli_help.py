@@ -9,6 +9,7 @@ import sys
 import pytest
 from rich.console import Console
 
+from conftest import cli_run
 from intrinsym.app import cli, text_tables
 from intrinsym.progress import STAGES, StageDone, next_stage
 
@@ -45,12 +46,12 @@ def test_a_missing_required_option_is_one_line():
     assert "required: -o/--out" in p.stderr and "intrinsym detect --help" in p.stderr
 
 
-def test_typos_get_a_suggestion():
-    p = run("detect", "--example", "-o", "x", "--sorce", "30")
+def test_typos_get_a_suggestion(capsys):
+    p = cli_run(capsys, "detect", "--example", "-o", "x", "--sorce", "30")
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "did you mean --source?" in p.stderr
-    p = run("detcet", "--example")
+    p = cli_run(capsys, "detcet", "--example")
     assert p.returncode == 2 and "did you mean detect?" in p.stderr
-    p = run("render", "x", "--up", "zz")
+    p = cli_run(capsys, "render", "x", "--up", "zz")
     assert p.returncode == 2 and "did you mean z?" in p.stderr and p.stderr.count("\n") == 1
 
 

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 from matplotlib.image import imread
 
-from conftest import sphere_result
+from conftest import cli_run, sphere_result
 from intrinsym.app import viz
 from intrinsym.pipeline import Result
 
@@ -178,31 +178,31 @@ def run(*args):
     )
 
 
-def test_cli_render_and_view(tmp_path):
+def test_cli_render_and_view(tmp_path, capsys):
     out, _ = sphere_result(tmp_path)
-    p = run("render", out, "--source-sample", "1")
+    p = cli_run(capsys, "render", out, "--source-sample", "1")
     assert p.returncode == 0, p.stderr
     assert (out / "figures" / "marginal.png").is_file() and (out / "figures" / "graph.png").is_file()
-    p = run("view", out, "-o", tmp_path / "v.html", "-q")
+    p = cli_run(capsys, "view", out, "-o", tmp_path / "v.html", "-q")
     assert p.returncode == 0 and p.stdout == "", p.stderr
     html = (tmp_path / "v.html").read_text()
     assert "http://" not in html and "https://" not in html and "<link" not in html  # self-contained
 
 
 @pytest.mark.parametrize("command", ["render", "view"])
-def test_cli_render_view_errors_are_one_line_exit_2(tmp_path, command):
-    p = run(command, tmp_path / "missing")
+def test_cli_render_view_errors_are_one_line_exit_2(tmp_path, capsys, command):
+    p = cli_run(capsys, command, tmp_path / "missing")
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "missing" in p.stderr
     out, _ = sphere_result(tmp_path)
     (tmp_path / "sphere.off").write_text("OFF\n3 1 0\n0 0 0\n")
-    p = run(command, out)
+    p = cli_run(capsys, command, out)
     assert p.returncode == 2 and "sphere.off" in p.stderr and "Traceback" not in p.stderr
     assert not (out / "figures").exists() and not (out / "viewer.html").exists()
 
 
-def test_cli_render_rejects_a_bad_source_sample(tmp_path):
+def test_cli_render_rejects_a_bad_source_sample(tmp_path, capsys):
     out, _ = sphere_result(tmp_path)
-    p = run("render", out, "--source-sample", "10000")
+    p = cli_run(capsys, "render", out, "--source-sample", "10000")
     assert p.returncode == 2 and "source sample" in p.stderr
     assert not (out / "figures").exists()
 
