@@ -152,7 +152,14 @@ def test_figure_global_map_stays_precise_when_the_cell_map_keeps_a_hair_more_mas
     assert abs(float(mass[result.source_point_vertex].mean()) - chosen.mass) < 0.05
 
 
-@pytest.mark.parametrize("name", ["mirror", "figure"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "mirror",
+        # the same claim at the same size on a second shape; the mirror's case runs by default
+        pytest.param("figure", marks=pytest.mark.slow),  # a detect at 120 / 1500 (CI: -m slow)
+    ],
+)
 def test_confidence_is_calibrated_on_an_exact_symmetry(name, request):
     """The calibration tables (fitted on the TOSCA poses) on generated shapes whose
     symmetry is known exactly: the bent ellipsoid's mirror, and the posed figure's (the
