@@ -133,38 +133,54 @@ EXTRA_MODULES = ("dask", "distributed", "bokeh", "pandas", "pyarrow", "matplotli
 
 
 def test_a_core_install_detects_and_names_each_missing_extra_in_one_line(tmp_path):
+    import json
     import subprocess
     import sys
 
+    import numpy as np
+
+    import intrinsym
+
+    # one process for all the commands (each started its own: 1-2 s of imports apiece),
+    # each command's exit code, standard output and error kept apart
     code = (
-        "import sys\n"
+        "import contextlib, io, json, sys\n"
         f"for name in {EXTRA_MODULES!r}: sys.modules[name] = None  # as if not installed\n"
         "from intrinsym.app.cli import main\n"
-        "code = main(sys.argv[1:])\n"
+        "ran = []\n"
+        "for argv in json.loads(sys.argv[1]):\n"
+        "    out, err = io.StringIO(), io.StringIO()\n"
+        "    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):\n"
+        "        try:\n"
+        "            code = main(argv)\n"
+        "        except SystemExit as stop:\n"
+        "            code = stop.code\n"
+        "    ran.append((code, out.getvalue(), err.getvalue()))\n"
         f"assert not set({EXTRA_MODULES!r}) & {{name for name, m in sys.modules.items() if m is not None}}\n"
-        "sys.exit(code)\n"
+        "print(json.dumps(ran))\n"
     )
-
-    def run(*argv: str) -> subprocess.CompletedProcess:
-        return subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, cwd=tmp_path)
-
-    done = run("detect", "--example", *CLI_SMALL, "-o", "spot", "--quiet")
-    assert done.returncode == 0, done.stderr
-    assert (tmp_path / "spot" / "symmetry_map.npy").is_file()
-    for argv, what, extra in [
+    missing = [
         (("batch", "spot.off", "-o", "many"), "intrinsym batch", "batch"),
         (("render", "spot"), "intrinsym render", "viz"),
         (("detect", "--example", "-o", "again", "--figures"), "intrinsym detect --figures", "viz"),
-    ]:
-        done = run(*argv)
-        assert (done.returncode, done.stdout) == (2, ""), argv
-        assert done.stderr == f"intrinsym: error: {what} needs the [{extra}] extra: pip install 'intrinsym[{extra}]'\n"
-    assert not (tmp_path / "again").exists()
+    ]
     # evaluate is core: its scores without the curve, which needs [viz]
-    import numpy as np
-
-    np.save(tmp_path / "truth.npy", np.arange(len(np.load(tmp_path / "spot" / "symmetry_map.npy"))))
-    done = run("evaluate", "spot", "--symmetry-map", "truth.npy")
-    assert done.returncode == 0, done.stderr
+    np.save(tmp_path / "truth.npy", np.arange(len(intrinsym.load(intrinsym.example_path()).vertices)))
+    commands = [
+        ("detect", "--example", *CLI_SMALL, "-o", "spot", "--quiet"),
+        *(argv for argv, _, _ in missing),
+        ("evaluate", "spot", "--symmetry-map", "truth.npy"),
+    ]
+    p = subprocess.run([sys.executable, "-c", code, json.dumps(commands)], capture_output=True, text=True, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    detected, *refused, evaluated = json.loads(p.stdout)
+    assert detected[0] == 0, detected[2]
+    assert (tmp_path / "spot" / "symmetry_map.npy").is_file()
+    assert len(np.load(tmp_path / "spot" / "symmetry_map.npy")) == len(np.load(tmp_path / "truth.npy"))
+    for (argv, what, extra), (returncode, stdout, stderr) in zip(missing, refused, strict=True):
+        assert (returncode, stdout) == (2, ""), argv
+        assert stderr == f"intrinsym: error: {what} needs the [{extra}] extra: pip install 'intrinsym[{extra}]'\n"
+    assert not (tmp_path / "again").exists()
+    assert evaluated[0] == 0, evaluated[2]
     assert (tmp_path / "spot" / "scores.json").is_file() and not (tmp_path / "spot" / "curve.png").exists()
-    assert "no curve.png: it needs the [viz] extra" in done.stderr
+    assert "no curve.png: it needs the [viz] extra" in evaluated[2]
