@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -113,6 +114,30 @@ def cli_run(capsys: pytest.CaptureFixture[str], *args: object) -> subprocess.Com
         code = stop.code
     out, err = capsys.readouterr()
     return subprocess.CompletedProcess(argv, code, out, err)
+
+
+#: The browser of the viewer tests: Debian's chromium (CI installs it in .ci/run).
+CHROMIUM = Path("/usr/bin/chromium")
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """A headless Chromium driven by Playwright, started once for the session (about 1.5 s
+    a start): each viewer test opens its own page in it (a fresh browser context), and
+    closes it. Skips where Playwright or chromium is missing."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e .[test])")
+    executable = CHROMIUM if CHROMIUM.exists() else shutil.which("chromium")
+    if executable is None:
+        pytest.skip("chromium is not installed (apt-get install -y chromium; CI installs it in .ci/run)")
+    pw = sync_api.sync_playwright().start()
+    try:
+        # SwiftShader: WebGL on a machine without a GPU.
+        swiftshader = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+        chromium = pw.chromium.launch(executable_path=str(executable), args=["--no-sandbox", *swiftshader])
+        yield chromium
+        chromium.close()
+    finally:
+        pw.stop()
 
 
 #: The command line's small sizes on the shipped example: every run takes seconds.

@@ -70,13 +70,13 @@ def test_figures_show_the_global_map_with_a_legend(mapped):
     assert orange > 100 and blue > 100
 
 
-def test_viewer_opens_on_the_two_sides_with_a_legend(mapped, tmp_path):
+def test_viewer_opens_on_the_two_sides_with_a_legend(mapped, tmp_path, browser):
     from test_viewer import _start_page, _symmetries
 
     out, v, m = mapped
     _symmetries(out, v)
     viewer.write(out)
-    pw, browser, page, errors = _start_page(out / "viewer.html", width=1200)
+    page, errors = _start_page(browser, out / "viewer.html", width=1200)
     try:
         assert page.evaluate("window.intrinsym.mode") == "side"
         assert "its two sides" in page.locator("#label-parts").inner_text()
@@ -96,8 +96,7 @@ def test_viewer_opens_on_the_two_sides_with_a_legend(mapped, tmp_path):
         assert page.evaluate("window.intrinsym.mode") == "parts"
         assert errors == []
     finally:
-        browser.close()
-        pw.stop()
+        page.close()
 
 
 def test_export_ply_opens_in_trimesh_in_the_input_order(mapped, tmp_path):

@@ -15,8 +15,6 @@ from conftest import sphere_result
 from intrinsym import Result
 from intrinsym.app import viewer, viz
 
-CHROMIUM = Path("/usr/bin/chromium")
-
 
 def unpack(text, dtype):
     return np.frombuffer(zlib.decompress(base64.b64decode(text)), dtype=dtype)
@@ -137,23 +135,16 @@ def test_page_opens_on_the_best_symmetry_and_the_most_telling_sample(tmp_path):
     assert not set(more) & set(viewer.MAIN_PARAMETERS) and not any("history" in key for key in more)
 
 
-def _start_page(html: Path, width: int = 900):
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install -e .[test])")
-    if not CHROMIUM.exists() and shutil.which("chromium") is None:
-        pytest.skip("chromium is not installed (apt-get install -y chromium; CI installs it in .ci/run)")
-    pw = sync_api.sync_playwright().start()
-    # SwiftShader: WebGL on a machine without a GPU.
-    browser = pw.chromium.launch(
-        executable_path=str(CHROMIUM if CHROMIUM.exists() else shutil.which("chromium")),
-        args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
-    )
+def _start_page(browser, html: Path, width: int = 900):
+    """A page of the session's ``browser`` (conftest) on ``html``, loaded; and the list
+    its console errors and page errors go to. Close it when done."""
     page = browser.new_page(viewport={"width": width, "height": 600})
     errors = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.goto(html.as_uri())
     page.wait_for_function("window.intrinsym && window.intrinsym.ready", timeout=60000)
-    return pw, browser, page, errors
+    return page, errors
 
 
 def _red_centre(shot: np.ndarray, left: float, right: float) -> tuple[np.ndarray, np.ndarray]:
@@ -167,14 +158,14 @@ def _red_centre(shot: np.ndarray, left: float, right: float) -> tuple[np.ndarray
     return np.nonzero(red)
 
 
-def test_viewer_in_a_headless_browser(tmp_path):
+def test_viewer_in_a_headless_browser(tmp_path, browser):
     out, v = sphere_result(tmp_path)
     sources = v[::16]
     winner = 1 + int(np.argmin(np.abs(sources[1:, 1])))  # its antipode lies at mid-height
     _make_telling(out, winner)
     _symmetries(out, v)
     data = _page_data(viewer.write(out))
-    pw, browser, page, errors = _start_page(out / "viewer.html", width=1200)
+    page, errors = _start_page(browser, out / "viewer.html", width=1200)
     try:
         # On load: the global symmetry (listed second, scored lower) on the left, the marginal
         # of the most telling sample on the right, its top (the antipode) turned to the camera.
@@ -238,11 +229,10 @@ def test_viewer_in_a_headless_browser(tmp_path):
         assert page.locator("#run").inner_text().count("detect") == 1
         assert errors == []
     finally:
-        browser.close()
-        pw.stop()
+        page.close()
 
 
-def test_viewer_colours_the_symmetry_view_by_confidence(tmp_path):
+def test_viewer_colours_the_symmetry_view_by_confidence(tmp_path, browser):
     out, v = sphere_result(tmp_path)
     _symmetries(out, v)
     conf = np.clip(v[:, 2], 0, 1).astype(np.float32)  # 0 on the lower half, up to 1 at the top
@@ -250,7 +240,7 @@ def test_viewer_colours_the_symmetry_view_by_confidence(tmp_path):
     data = _page_data(viewer.write(out))
     assert np.array_equal(unpack(data["confidence"], np.float32), conf)
     assert data["global_confidence"] == pytest.approx(float(conf.mean()))
-    pw, browser, page, errors = _start_page(out / "viewer.html")
+    page, errors = _start_page(browser, out / "viewer.html")
     try:
         page.locator("#by-confidence input").check()
         assert "Confidence of the symmetry map" in page.locator("#label-parts").inner_text()
@@ -262,8 +252,7 @@ def test_viewer_colours_the_symmetry_view_by_confidence(tmp_path):
         assert "global" in page.locator("#label-parts").inner_text()
         assert errors == []
     finally:
-        browser.close()
-        pw.stop()
+        page.close()
 
 
 def _hostile(tmp_path: Path) -> tuple[Path, Path]:
@@ -297,9 +286,9 @@ def test_page_data_is_strict_json_without_a_less_than_sign(tmp_path):
     assert data["symmetries"][0]["score"] == "NaN"
 
 
-def test_hostile_names_and_scores_do_not_blank_the_page(tmp_path):
+def test_hostile_names_and_scores_do_not_blank_the_page(tmp_path, browser):
     out, mesh = _hostile(tmp_path)
-    pw, browser, page, errors = _start_page(viewer.write(out, mesh_path=mesh))
+    page, errors = _start_page(browser, viewer.write(out, mesh_path=mesh))
     try:
         assert page.locator("#title").inner_text() == f"intrinsym: {mesh.name}"
         assert page.evaluate("window.hacked") is None
@@ -311,5 +300,4 @@ def test_hostile_names_and_scores_do_not_blank_the_page(tmp_path):
         assert "<!--<script>, score NaN" in page.locator("#label-parts").inner_text()
         assert errors == []
     finally:
-        browser.close()
-        pw.stop()
+        page.close()
