@@ -103,6 +103,7 @@ def cli_run(capsys: pytest.CaptureFixture[str], *args: object) -> subprocess.Com
 
     For the tests of what a command prints and returns; each of test_cli, test_cli_help
     and test_viz keeps a test that starts its own process (about 1 s each: the imports).
+    What the test printed before is read from ``capsys`` and dropped.
     """
     from intrinsym.app import cli
 
