@@ -6,7 +6,11 @@ with a global map holds histograms of the symmetry map's per-vertex score
 its marginal mass alone (``symmetry_mass``), :data:`tosca.MASS_BINS` equal-width bins,
 with, per bin, how many vertices map within 0.05 of their true image; ``score_split``
 holds the score's bins once per bin of the global map's local distortion
-(``Result.map_distortion``, :data:`intrinsym.globalmap.confidence.DISTORTION_BINS`). From the
+(``Result.map_distortion``, :data:`intrinsym.globalmap.confidence.DISTORTION_BINS`).
+``--feature partial_score`` reads ``benchmarks/partial.py``'s cache instead: the score
+of the SHREC'16 shapes whose dominant symmetry is partial, "within 0.05" of the true
+partner (a vertex without one never is), the rows of
+:data:`intrinsym.globalmap.confidence.PARTIAL_CALIBRATION`. From the
 ``--feature`` chosen (default ``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
@@ -22,7 +26,8 @@ holds the score's bins once per bin of the global map's local distortion
 Every vertex of a mass bin takes the confidence of the bin's centre (the histogram holds
 no finer mass). Command::
 
-    python benchmarks/calibration.py --cache DIR [--tag TAG] [--feature score_split|score|mass] [-o TABLE.md]
+    python benchmarks/calibration.py --cache DIR [--tag TAG] [-o TABLE.md]
+        [--feature score_split|score|mass|partial_score]
 """
 
 from __future__ import annotations
@@ -166,24 +171,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tag", help="only rows with this tag")
     parser.add_argument(
         "--feature",
-        choices=("score_split", "score", "mass"),
+        choices=("score_split", "score", "mass", "partial_score"),
         default="score_split",
-        help="what is calibrated (score_split: the score, one table per bin of the map's local distortion)",
+        help="what is calibrated (score_split: the score, one table per bin of the map's local distortion; "
+        "partial_score: the score of partial symmetries' maps, from benchmarks/partial.py's cache)",
     )
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
     args = parser.parse_args(argv)
     rows = load_rows(args.cache, args.tag, args.feature)
     if len({r["class"] for r in rows}) < 2:
-        print(f"calibration.py: need rows of at least two classes with a global map in {args.cache}")
+        print(f"calibration.py: need rows of at least two classes with a {args.feature} histogram in {args.cache}")
         return 1
     text = markdown(rows)
     values = fit(rows)
-    shipped = np.concatenate(confidence.CALIBRATION)
+    name, tables = "CALIBRATION", confidence.CALIBRATION
+    if args.feature == "partial_score":
+        name, tables = "PARTIAL_CALIBRATION", (confidence.PARTIAL_CALIBRATION,)
+    shipped = np.concatenate(tables)
     same = values.shape == shipped.shape and np.allclose(values, shipped, atol=5e-4)
-    tables = np.split(values, len(values) // len(confidence.CALIBRATION[0]))
     same_text = "equal to" if same else "differs from"
-    text += f"\nFit on all {len(rows)} shapes ({same_text} intrinsym.globalmap.confidence's):\n\n"
-    text += "CALIBRATION = (\n" + "".join(f"    ({', '.join(f'{v:.3f}' for v in t)}),\n" for t in tables) + ")\n"
+    text += f"\nFit on all {len(rows)} shapes ({same_text} intrinsym.globalmap.confidence.{name}):\n\n"
+    text += f"{name} = (\n"
+    text += "".join(f"    ({', '.join(f'{v:.3f}' for v in t)}),\n" for t in np.split(values, len(tables))) + ")\n"
     print(text)
     if args.out:
         args.out.write_text(text)

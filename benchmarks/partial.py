@@ -45,7 +45,7 @@ from _data import add_data_argument, data_folder, no_data
 from intrinsym.evaluation import partial_truth
 from intrinsym.extract import records
 from intrinsym.globalmap import confidence
-from tosca import _clean_floats, _machine, _overrides
+from tosca import MASS_BINS, _clean_floats, _machine, _overrides
 
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 1
@@ -102,7 +102,7 @@ def best_parts(result: intrinsym.Result, n: int) -> np.ndarray | None:
 def run(path: Path, method: str, overrides: Mapping) -> dict:
     """One shape scored under ``method`` ("intrinsym", "none" or "pyfm")."""
     shape, truth = partial_truth.load_shrec16(path)
-    row: dict = {"shape": path.stem, "method": method, "vertices": len(shape.vertices)}
+    row: dict = {"shape": path.stem, "class": _group(path.stem)[1], "method": method, "vertices": len(shape.vertices)}
     row["partnered_share"] = float(truth.partnered.mean())
     start = time.perf_counter()
     iou, result = float("nan"), None
@@ -121,8 +121,45 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         iou = 0.0 if parts is None else partial_truth.part_iou(parts, truth)
         row["coverage"] = float((vmap >= 0).mean())
         row["confidence"] = confidence_row(result.symmetry_confidence(), vmap, truth, scores)
+        row["reliability"] = reliability(result, vmap, truth, scores)
     row.update(scores.as_dict(), iou=iou)
     return row
+
+
+def _right(vmap: np.ndarray, truth: partial_truth.PartialTruth, scores: partial_truth.PartialMapScores) -> tuple:
+    """The scored vertices with an image, and whether each image is right: the vertex is
+    partnered and its image within 0.05 of the partner (a vertex without a partner has no
+    right image)."""
+    errors = np.full(len(vmap), np.inf)
+    errors[truth.partnered] = scores.errors
+    scored = (vmap >= 0) & (truth.partner != partial_truth.NOT_SCORED)
+    return scored, errors[scored] <= 0.05
+
+
+def reliability(
+    result: intrinsym.Result,
+    vmap: np.ndarray,
+    truth: partial_truth.PartialTruth,
+    scores: partial_truth.PartialMapScores,
+) -> dict | None:
+    """Per bin of the symmetry map's per-vertex score (``symmetry_score``), how many
+    scored vertices with an image fall in it and how many of those are right
+    (:func:`_right`), the histogram ``benchmarks/calibration.py`` fits, as
+    ``benchmarks/tosca.py`` records it, keyed by the dominant symmetry's kind
+    (``partial_score``: a partial symmetry's map, ``score``: a global one); None
+    without a dominant symmetry."""
+    sym = None if result.extraction is None else result.extraction.dominant_symmetry
+    if sym is None:
+        return None
+    scored, right = _right(vmap, truth, scores)
+    which = np.minimum((result.symmetry_score()[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
+    histogram = {
+        "bins": MASS_BINS,
+        "groups": 1,
+        "count": np.bincount(which, minlength=MASS_BINS).tolist(),
+        "within_0.05": np.bincount(which, weights=right, minlength=MASS_BINS).astype(int).tolist(),
+    }
+    return {"partial_score" if sym.kind == "partial" else "score": histogram}
 
 
 def confidence_row(
@@ -131,12 +168,10 @@ def confidence_row(
     """The confidence's calibration over the scored vertices with an image: right when
     partnered and within 0.05 of the partner (``scores``; a vertex without a partner has
     no right image)."""
-    errors = np.full(len(vmap), np.inf)
-    errors[truth.partnered] = scores.errors
-    scored = (vmap >= 0) & (truth.partner != partial_truth.NOT_SCORED)
+    scored, right = _right(vmap, truth, scores)
     if not scored.any():
         return {"ece": None, "mean": None, "n": 0}
-    ece, _ = confidence.calibration(conf[scored], errors[scored] <= 0.05)
+    ece, _ = confidence.calibration(conf[scored], right)
     return {"ece": ece, "mean": float(conf[scored].mean()), "n": int(scored.sum())}
 
 

@@ -123,3 +123,12 @@ def test_calibration_report_by_hand():
     assert report["bins"][2]["accuracy"] == 0.5
     with pytest.raises(ValueError, match="3 confidences for 4 errors"):
         confidence.calibration_report(np.zeros(3), np.zeros(4))
+
+
+def test_a_partial_symmetrys_map_takes_its_own_table_whatever_the_distortion():
+    table = np.asarray(confidence.PARTIAL_CALIBRATION)
+    assert table.shape == (20,) and 0 <= table.min() and table.max() <= 1 and np.all(np.diff(table) >= 0)
+    centres = (np.arange(20) + 0.5) / 20
+    d = np.array([0.0, 1.0, np.nan, 0.015] * 5)
+    assert confidence.calibrated(centres, d, partial=True) == pytest.approx(table, abs=1e-6)
+    assert confidence.calibrated(np.array([0.05]), partial=True)[0] == pytest.approx((table[0] + table[1]) / 2)

@@ -17,7 +17,7 @@ import pytest
 import intrinsym
 from intrinsym.evaluation import evaluate, partial_truth
 from intrinsym.extract import extract
-from intrinsym.globalmap import vertex_maps
+from intrinsym.globalmap import confidence, vertex_maps
 from intrinsym.globalmap.vertex_maps import fitted_vertex_map
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import Shape, surface_area
@@ -204,3 +204,8 @@ def test_the_partial_shapes_limbs_map_onto_each_other_and_its_body_has_no_partne
     scores = partial_truth.score_partial(result.symmetry_map(), mesh, truth)
     assert scores.unpartnered_unmapped >= 0.95, scores
     assert scores.partnered_within_010 >= 0.35, scores
+    # a partial symmetry's map takes the partial symmetries' table, not the global maps'
+    conf = result.symmetry_confidence()
+    mapped = result.symmetry_map() >= 0
+    own = confidence.calibrated(result.symmetry_score(), partial=True)
+    assert np.allclose(conf[mapped], own[mapped], atol=1e-6) and not conf[~mapped].any()

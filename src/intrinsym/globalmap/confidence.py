@@ -14,7 +14,10 @@ errors on posed shapes. :func:`score` weighs it by how far two global maps agree
 image, and :func:`calibrated` maps that through a non-decreasing table fitted on posed
 shapes (one per bin of how far the map keeps the distances around the vertex) to the
 probability that a vertex's image lies within 0.05 of the true one
-(``symmetry_confidence.npy``); docs/results.md checks that table on held-out classes with
+(``symmetry_confidence.npy``); the map of a partial symmetry (no global map to weigh
+it against, no local distortion that separates right from wrong: it changes the
+distances across its parts' borders) takes the mass through its own table, fitted on
+the SHREC'16 partial shapes. docs/results.md checks the tables on held-out classes with
 :func:`calibration` (reliability table and expected calibration error).
 """
 
@@ -31,6 +34,7 @@ from ..geodesics.geodesics import SparseDistances
 __all__ = [
     "CALIBRATION",
     "DISTORTION_BINS",
+    "PARTIAL_CALIBRATION",
     "Bin",
     "calibrated",
     "calibration",
@@ -69,6 +73,19 @@ CALIBRATION = (
         0.130, 0.507, 0.531, 0.531, 0.531, 0.546, 0.638, 0.678, 0.747, 0.794,
         0.804, 0.804, 0.885, 0.935, 0.949, 0.949, 0.955, 1.000, 1.000, 1.000,
     ),
+)  # fmt: skip
+
+
+#: The calibration of a partial symmetry's map (self-matching): the share of its
+#: vertices whose image lies within 0.05 sqrt(area) of the true partner (a vertex whose
+#: partner is missing has none), per 1/20-wide bin of its marginal mass (value at the
+#: bin's centre), fitted (isotonic) over the 58 SHREC'16 partial shapes whose dominant
+#: symmetry is partial by ``benchmarks/calibration.py --feature partial_score``. It stays
+#: below about one half: on those shapes 0.29 of such a map's images are right, and about
+#: half of those at the highest mass.
+PARTIAL_CALIBRATION = (
+    0.103, 0.103, 0.147, 0.178, 0.178, 0.221, 0.248, 0.276, 0.276, 0.276,
+    0.334, 0.334, 0.334, 0.426, 0.426, 0.426, 0.426, 0.426, 0.426, 0.521,
 )  # fmt: skip
 
 
@@ -166,7 +183,7 @@ def distortion_group(distortion: np.ndarray | None, n: int) -> np.ndarray:
     return np.where(np.isnan(d), len(DISTORTION_BINS), np.digitize(d, DISTORTION_BINS)).astype(np.int64)
 
 
-def calibrated(mass: np.ndarray, distortion: np.ndarray | None = None) -> np.ndarray:
+def calibrated(mass: np.ndarray, distortion: np.ndarray | None = None, *, partial: bool = False) -> np.ndarray:
     """Per-vertex confidence from :func:`score`: the probability that the vertex's image
     lies within 0.05 sqrt(area) of its true image.
 
@@ -178,22 +195,31 @@ def calibrated(mass: np.ndarray, distortion: np.ndarray | None = None) -> np.nda
         The global map's local distortion at every vertex
         (:func:`intrinsym.globalmap.distortion.local_distortion`, sqrt(area) units; NaN unknown);
         None: every vertex takes the first table.
+    partial : bool
+        The map is a partial symmetry's: every vertex takes :data:`PARTIAL_CALIBRATION`
+        (``distortion`` is ignored).
 
     Returns
     -------
     (N,) float32 in [0, 1]
         Linear interpolation of the vertex's table of :data:`CALIBRATION`
-        (:func:`distortion_group`) between the bin centres (constant beyond the first
-        and last).
+        (:func:`distortion_group`), or of :data:`PARTIAL_CALIBRATION`, between the bin
+        centres (constant beyond the first and last).
     """
     x = np.asarray(mass, dtype=np.float64)
+    if partial:
+        return _through(x, PARTIAL_CALIBRATION).astype(np.float32)
     group = distortion_group(distortion, len(x))
     out = np.empty(len(x))
     for g, table in enumerate(CALIBRATION):
-        centres = (np.arange(len(table)) + 0.5) / len(table)
         inside = group == g
-        out[inside] = np.interp(x[inside], centres, table)
+        out[inside] = _through(x[inside], table)
     return out.astype(np.float32)
+
+
+def _through(x: np.ndarray, table: tuple[float, ...]) -> np.ndarray:
+    """``x`` through a table of values at the centres of equal-width bins of [0, 1]."""
+    return np.interp(x, (np.arange(len(table)) + 0.5) / len(table), table)
 
 
 def carried_confidence(confidence: np.ndarray, vertex_source: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -262,16 +262,23 @@ class Result:
         under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
         (``symmetry_confidence.npy``): :meth:`symmetry_score` through
         :func:`intrinsym.globalmap.confidence.calibrated`, by the map's local distortion
-        (:attr:`map_distortion`); where no source sample's cell reaches (a connected
-        component without samples, carried there), that of the nearest vertex a cell
-        holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where the map gives
-        no image."""
+        (:attr:`map_distortion`), or, for a partial symmetry's map of a shape onto itself,
+        through the partial symmetries' table; where no source sample's cell reaches (a
+        connected component without samples, carried there), that of the nearest vertex a
+        cell holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where the
+        map gives no image."""
         # map_distortion is that of global_map: without it, the map scored is another
         local = self.map_distortion if self.global_map is not None else None
-        conf = calibrated(self.symmetry_score(mass), local)
+        conf = calibrated(self.symmetry_score(mass), local, partial=self._partial_map())
         if self.support is not None and self.support.source_mesh_vertices is not None:
             conf = carried_confidence(conf, self.support.vertex_source, self.support.source_mesh_vertices)
         return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
+
+    def _partial_map(self) -> bool:
+        """Whether :meth:`symmetry_map` is a partial symmetry's map of a shape onto itself."""
+        sym = None if self.extraction is None else self.extraction.dominant_symmetry
+        self_match = self.support is not None and self.support.self_match
+        return self.global_map is None and self_match and sym is not None and sym.kind == "partial"
 
     def global_confidence(self) -> float | None:
         """The expected share of vertices whose image lies within 0.05 sqrt(area) of the
