@@ -45,7 +45,7 @@ from _data import add_data_argument, data_folder, no_data
 from intrinsym.evaluation import partial_truth
 from intrinsym.extract import records
 from intrinsym.globalmap import confidence
-from tosca import MASS_BINS, _clean_floats, _machine, _overrides
+from tosca import _clean_floats, _machine, _overrides, score_histogram
 
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 1
@@ -152,13 +152,7 @@ def reliability(
     if sym is None:
         return None
     scored, right = _right(vmap, truth, scores)
-    which = np.minimum((result.symmetry_score()[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
-    histogram = {
-        "bins": MASS_BINS,
-        "groups": 1,
-        "count": np.bincount(which, minlength=MASS_BINS).tolist(),
-        "within_0.05": np.bincount(which, weights=right, minlength=MASS_BINS).astype(int).tolist(),
-    }
+    histogram = score_histogram(result.symmetry_score()[scored], {"within_0.05": right})
     return {"partial_score" if sym.kind == "partial" else "score": histogram}
 
 

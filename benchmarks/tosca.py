@@ -257,20 +257,29 @@ def reliability(result, shape, sym) -> dict | None:
         if value is None:
             out[key] = None
             continue
-        which = np.minimum((value[scored] * MASS_BINS).astype(np.int64), MASS_BINS - 1)
-        groups = 1
+        right = {"within_0.05": err < 0.05, "within_0.10": err < 0.10}
         if key == "score_split":  # each table's bins in turn
-            which += MASS_BINS * confidence.distortion_group(local, len(vmap))[scored]
-            groups = len(confidence.CALIBRATION)
-        size = groups * MASS_BINS
-        out[key] = {
-            "bins": MASS_BINS,
-            "groups": groups,
-            "count": np.bincount(which, minlength=size).tolist(),
-            "within_0.05": np.bincount(which, weights=err < 0.05, minlength=size).astype(int).tolist(),
-            "within_0.10": np.bincount(which, weights=err < 0.10, minlength=size).astype(int).tolist(),
-        }
+            group = confidence.distortion_group(local, len(vmap))[scored]
+            out[key] = score_histogram(value[scored], right, group, len(confidence.CALIBRATION))
+        else:
+            out[key] = score_histogram(value[scored], right)
     return out
+
+
+def score_histogram(
+    value: np.ndarray, right: Mapping[str, np.ndarray], group: np.ndarray | None = None, groups: int = 1
+) -> dict:
+    """A reliability histogram of per-vertex values in [0, 1]: :data:`MASS_BINS` equal-width
+    bins (once per group, each vertex in its ``group``'s), how many vertices fall in each
+    (``count``) and, per key of ``right``, how many of them are right."""
+    which = np.minimum((value * MASS_BINS).astype(np.int64), MASS_BINS - 1)
+    if group is not None:
+        which = which + MASS_BINS * group
+    size = groups * MASS_BINS
+    histogram = {"bins": MASS_BINS, "groups": groups, "count": np.bincount(which, minlength=size).tolist()}
+    for key, ok in right.items():
+        histogram[key] = np.bincount(which, weights=ok, minlength=size).astype(int).tolist()
+    return histogram
 
 
 def _sample_vertices(result) -> tuple[np.ndarray, np.ndarray]:
