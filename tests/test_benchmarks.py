@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+import intrinsym
 from conftest import shared
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -195,4 +196,30 @@ def test_local_isometry_table_by_hand(tmp_path, capsys):
     assert lines[0].startswith("| shape | misses (> 0.05) | map at the misses | truth at the misses |")
     assert lines[2] == "| a | 0.125 | 0.0200 | 0.0000 | 0.0040 | 0.0013 |"
     assert local_isometry.main(["--data", str(tmp_path / "absent"), "--saved", str(tmp_path)]) == 0
+    assert "skipped" in capsys.readouterr().out
+
+
+def test_unary_partner_tells_the_true_mirror_from_a_random_map(tmp_path, capsys):
+    """On the bent ellipsoid, the default unary keeps the true mirror partner within a
+    width of each sample's best target and never at the floor; a random "partner"
+    (an independent wrong truth) sits at the floor on half the samples."""
+    import unary_partner
+    from conftest import mirror_shape
+    from intrinsym.geodesics import geodesics
+
+    vertices, faces, sym = mirror_shape()
+    shape = intrinsym.Shape(vertices, faces)
+    _, vertex, graph = geodesics.unit_area_graph(shape)
+    params = intrinsym.make_params(n_source=60, n_target=600)
+    true = unary_partner.measure(unary_partner.Truth("m", shape, sym, graph, vertex), "wks*spin", params)
+    wrong = np.random.default_rng(0).permutation(len(sym))
+    rand = unary_partner.measure(unary_partner.Truth("r", shape, wrong, graph, vertex), "wks*spin", params)
+    assert true["samples"] >= 45 and true["argmax ≤0.10"] >= 0.9
+    assert true["partner at floor"] == 0.0 and true["partner z"] <= 1.5
+    assert true["best z"] <= true["partner z"]
+    assert rand["partner at floor"] >= 0.4 and rand["argmax ≤0.10"] <= 0.2
+    lines = unary_partner.markdown([true]).splitlines()
+    assert lines[0].startswith("| shape | term | samples | argmax ≤0.05 |")
+    assert lines[2].startswith(f"| m | wks*spin | {true['samples']} | ")
+    assert unary_partner.main(["--data", str(tmp_path / "absent")]) == 0
     assert "skipped" in capsys.readouterr().out
