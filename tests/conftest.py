@@ -114,8 +114,10 @@ def cli_run(capsys: pytest.CaptureFixture[str], *args: object) -> subprocess.Com
     """``intrinsym ARGS`` in this process, as a process would end: the exit code
     (``cli.main``'s, or an argument error's SystemExit), standard output and error.
 
-    For the tests of what a command prints and returns; each of test_cli, test_cli_help
-    and test_viz keeps a test that starts its own process (about 1 s each: the imports).
+    For the tests of what a command prints and returns (a process costs 1-2 s of imports).
+    The commands as processes: ``python -m intrinsym.app.cli detect`` (``example_detected``,
+    read by test_cli and test_reliability), ``python -m intrinsym`` (test_cli_help), and
+    those a test needs a process for (signals, resource limits, environments, memory).
     What the test printed before is read from ``capsys`` and dropped.
     """
     from intrinsym.app import cli

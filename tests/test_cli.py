@@ -1,8 +1,6 @@
 """The command line: outputs, exit codes and one-line errors."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -13,12 +11,6 @@ from conftest import CLI_SMALL as SMALL
 from conftest import cli_run
 from intrinsym import params
 from intrinsym.app import cli
-
-
-def run(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "intrinsym.app.cli", *map(str, args)], capture_output=True, text=True, timeout=300
-    )
 
 
 def test_detect_example_writes_result(example_detected):
@@ -80,7 +72,7 @@ def test_evaluate_command(tmp_path, mirror, capsys):
     np.save(tmp_path / "sym.npy", sym)
     out = tmp_path / "out"
     assert cli.main(["detect", str(mesh_path), "-o", str(out), "-q", *SMALL]) == 0
-    p = run("evaluate", out, "--symmetry-map", tmp_path / "sym.npy", "--json")
+    p = cli_run(capsys, "evaluate", out, "--symmetry-map", tmp_path / "sym.npy", "--json")
     assert p.returncode == 0, p.stderr
     scores = json.loads(p.stdout)
     assert 0.0 <= scores["mirror_hit"] <= 1.0 and scores["n_scored"] > 0
@@ -88,8 +80,7 @@ def test_evaluate_command(tmp_path, mirror, capsys):
     assert scores["truth_distortion"]["above_0.05"] == 0.0 and scores["truth_distortion"]["n_pairs"] > 0
     assert scores["map"]["distortion"]["above_0.05"] <= 1.0
     assert json.loads((out / "scores.json").read_text()) == scores
-    capsys.readouterr()
-    # the text report, in this process (the command's own process ran above)
+    # the text report
     assert cli.main(["evaluate", str(out), "--symmetry-map", str(tmp_path / "sym.npy")]) == 0
     text = capsys.readouterr().out
     assert "ground truth 0.000" in text

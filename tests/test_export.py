@@ -2,7 +2,6 @@
 partners alike, confidence) in the viewer, the figures, a PLY, a trimesh object and a
 polyscope view, and a short repr."""
 
-import subprocess
 import sys
 
 import numpy as np
@@ -11,7 +10,7 @@ import trimesh
 from matplotlib.image import imread
 from scipy.spatial import cKDTree
 
-from conftest import mirror_shape, sphere_result
+from conftest import cli_run, mirror_shape, sphere_result
 from intrinsym.app import cli, viewer, viz
 from intrinsym.mesh.shape import Shape
 from intrinsym.result import coloring
@@ -112,13 +111,9 @@ def test_export_ply_opens_in_trimesh_in_the_input_order(mapped, tmp_path):
     assert (sides[m < 0] == np.round(np.array(coloring.NONE_COLOR) * 255)).all()
 
 
-def test_export_errors_are_one_line(tmp_path):
+def test_export_errors_are_one_line(tmp_path, capsys):
     out, _ = sphere_result(tmp_path)  # no symmetry_map.npy
-    p = subprocess.run(
-        [sys.executable, "-m", "intrinsym", "export", str(out), "--ply", str(tmp_path / "a.ply")],
-        capture_output=True,
-        text=True,
-    )
+    p = cli_run(capsys, "export", out, "--ply", tmp_path / "a.ply")
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "no symmetry_map.npy" in p.stderr
 
 

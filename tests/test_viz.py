@@ -2,8 +2,6 @@
 
 import dataclasses
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -172,12 +170,6 @@ def test_figure_params_reject_bad_values():
         viz.FigureParams(views=())
 
 
-def run(*args):
-    return subprocess.run(
-        [sys.executable, "-m", "intrinsym.app.cli", *map(str, args)], capture_output=True, text=True, timeout=300
-    )
-
-
 def test_cli_render_and_view(tmp_path, capsys):
     out, _ = sphere_result(tmp_path)
     p = cli_run(capsys, "render", out, "--source-sample", "1")
@@ -227,13 +219,14 @@ def test_progress_keeps_stage_lines_and_shows_bp_iterations_transiently():
     assert "done load: 0.10 s" in text and "done bp: 1.00 s" in text
 
 
-def test_detect_with_figures_and_no_progress_when_stderr_is_not_a_terminal(tmp_path):
+def test_detect_with_figures_and_no_progress_when_stderr_is_not_a_terminal(tmp_path, capsys):
     # a 320-triangle ellipsoid: the figures draw the input mesh, each panel every triangle
     # (the example's 5,856 in 8 panels of 9 figures took most of this test's 10 s)
     path = tmp_path / "ellipsoid.off"
     sphere = trimesh.creation.icosphere(subdivisions=2)
     trimesh.Trimesh(sphere.vertices * [1.5, 1.0, 0.6], sphere.faces, process=False).export(path)
-    p = run(
+    p = cli_run(
+        capsys,
         "detect",
         path,
         "-o",
