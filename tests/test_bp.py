@@ -111,7 +111,9 @@ def test_initial_messages_match_oracle(schedule):
 
 
 def test_residual_schedule_matches_oracle_and_saves_updates():
-    mrf, d_tt = sphere_problem(40, 300, 4, seed=300)
+    # 200 targets: the dense oracle's residual run takes 1.5 s (3.7 s at 300); measured here:
+    # converged after 22 sweeps, 69 messages in the fewest, 0.93 of the colour schedule's in all
+    mrf, d_tt = sphere_problem(40, 200, 4, seed=300)
     kw = dict(iterations=60, tol=1e-6, seed=3)
     sparse = belief_propagation(mrf, schedule="residual", dtype=np.float64, backend="cpu", **kw)
     dense = belief_propagation_dense(
