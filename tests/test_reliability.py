@@ -112,6 +112,9 @@ def test_view_to_a_missing_folder_is_a_one_line_error(tmp_path, capsys, result_d
 
 
 def test_sigterm_is_handled_like_ctrl_c(tmp_path):
+    # 100 / 1000: seconds of work after the lock, so the signal lands mid-run; no
+    # subdivision of spot (2,930 vertices), and shorter kernels than at 200 / 3000, whose
+    # running kernel the exit waits for: 27 s once on a loaded machine (usually 0.3-0.5 s)
     out = tmp_path / "out"
     proc = subprocess.Popen(
         [
@@ -123,9 +126,9 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path):
             "-o",
             str(out),
             "--source",
-            "200",
+            "100",
             "--target",
-            "3000",
+            "1000",
         ],
         stderr=subprocess.PIPE,
         text=True,
