@@ -10,7 +10,10 @@ holds the score's bins once per bin of the global map's local distortion
 ``--feature partial_score`` reads ``benchmarks/partial.py``'s cache instead: the score
 of the SHREC'16 shapes whose dominant symmetry is partial, "within 0.05" of the true
 partner (a vertex without one never is), the rows of
-:data:`intrinsym.globalmap.confidence.PARTIAL_CALIBRATION`. From the
+:data:`intrinsym.globalmap.confidence.PARTIAL_CALIBRATION`; ``--feature match_score``
+reads ``benchmarks/shrec16_match.py``'s (``DIR/match``): the score of each SHREC'16
+partial shape's map onto its null shape, "within 0.05" of the nearer of the true and
+the mirror point, the rows of :data:`intrinsym.globalmap.confidence.PART_CALIBRATION`. From the
 ``--feature`` chosen (default ``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
@@ -27,7 +30,7 @@ Every vertex of a mass bin takes the confidence of the bin's centre (the histogr
 no finer mass). Command::
 
     python benchmarks/calibration.py --cache DIR [--tag TAG] [-o TABLE.md]
-        [--feature score_split|score|mass|partial_score]
+        [--feature score_split|score|mass|partial_score|match_score]
 """
 
 from __future__ import annotations
@@ -171,10 +174,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tag", help="only rows with this tag")
     parser.add_argument(
         "--feature",
-        choices=("score_split", "score", "mass", "partial_score"),
+        choices=("score_split", "score", "mass", "partial_score", "match_score"),
         default="score_split",
         help="what is calibrated (score_split: the score, one table per bin of the map's local distortion; "
-        "partial_score: the score of partial symmetries' maps, from benchmarks/partial.py's cache)",
+        "partial_score: the score of partial symmetries' maps, from benchmarks/partial.py's cache; "
+        "match_score: the score of parts' maps onto their wholes, from benchmarks/shrec16_match.py's)",
     )
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
     args = parser.parse_args(argv)
@@ -187,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     name, tables = "CALIBRATION", confidence.CALIBRATION
     if args.feature == "partial_score":
         name, tables = "PARTIAL_CALIBRATION", (confidence.PARTIAL_CALIBRATION,)
+    elif args.feature == "match_score":
+        name, tables = "PART_CALIBRATION", (confidence.PART_CALIBRATION,)
     shipped = np.concatenate(tables)
     same = values.shape == shipped.shape and np.allclose(values, shipped, atol=5e-4)
     same_text = "equal to" if same else "differs from"

@@ -41,9 +41,11 @@ from scipy.spatial import cKDTree
 
 import intrinsym
 from intrinsym.evaluation import evaluate, partial_truth
+from intrinsym.globalmap import confidence
 from intrinsym.mesh.shape import surface_area
 from intrinsym.result import modes
-from partial import _value, run_script
+from partial import _group, _value, run_script
+from tosca import score_histogram
 
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 1
@@ -126,8 +128,9 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     true = tree.query(partial_truth.load_barycentric(f"{base}.baryc_gt", null, n))[1]
     mirror = tree.query(partial_truth.load_barycentric(f"{base}.baryc_gt_sym", null, n))[1]
     graph = partial_truth.edge_graph(null, unit)
-    row: dict = {"shape": path.stem, "method": method, "vertices": n}
+    row: dict = {"shape": path.stem, "class": _group(path.stem)[1], "method": method, "vertices": n}
     start = time.perf_counter()
+    result = None
     if method == "pyfm":
         vmap = pyfm_match(shape, null)
         row["seconds"] = time.perf_counter() - start
@@ -147,12 +150,26 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         row["true_only"] = float(np.mean(at_true & ~at_mirror)) if far.any() else None
         row["mirror_only"] = float(np.mean(~at_true & at_mirror)) if far.any() else None
     errors = np.minimum(evaluate.map_errors(vmap, true, graph), evaluate.map_errors(vmap, mirror, graph))
+    if result is not None:
+        mapped = vmap >= 0
+        right = {"within_0.05": errors[mapped] <= 0.05}
+        row["reliability"] = {"match_score": score_histogram(result.symmetry_score()[mapped], right)}
+        row["confidence"] = confidence_row(result.symmetry_confidence()[mapped], right["within_0.05"])
     for t in THRESHOLDS:
         row[f"within_{round(t * 100):03d}"] = float(np.mean(errors <= t))
     mapped = np.isfinite(errors)
     row["coverage"] = float(mapped.mean())
     row["mean_error"] = float(errors[mapped].mean()) if mapped.any() else None
     return row
+
+
+def confidence_row(conf: np.ndarray, right: np.ndarray) -> dict:
+    """The map's confidence (``symmetry_confidence``) against its images within 0.05 of the
+    nearer answer, over the mapped vertices: ECE, mean and count."""
+    if not len(conf):
+        return {"ece": None, "mean": None, "n": 0}
+    ece, _ = confidence.calibration(conf, right)
+    return {"ece": ece, "mean": float(conf.mean()), "n": int(len(conf))}
 
 
 def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:

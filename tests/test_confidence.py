@@ -125,10 +125,13 @@ def test_calibration_report_by_hand():
         confidence.calibration_report(np.zeros(3), np.zeros(4))
 
 
-def test_a_partial_symmetrys_map_takes_its_own_table_whatever_the_distortion():
-    table = np.asarray(confidence.PARTIAL_CALIBRATION)
+@pytest.mark.parametrize("name", ["PARTIAL_CALIBRATION", "PART_CALIBRATION"])
+def test_a_single_table_is_taken_whatever_the_distortion(name):
+    """A partial symmetry's map and a part's map onto its whole each take one table."""
+    table = np.asarray(getattr(confidence, name))
     assert table.shape == (20,) and 0 <= table.min() and table.max() <= 1 and np.all(np.diff(table) >= 0)
     centres = (np.arange(20) + 0.5) / 20
     d = np.array([0.0, 1.0, np.nan, 0.015] * 5)
-    assert confidence.calibrated(centres, d, partial=True) == pytest.approx(table, abs=1e-6)
-    assert confidence.calibrated(np.array([0.05]), partial=True)[0] == pytest.approx((table[0] + table[1]) / 2)
+    assert confidence.calibrated(centres, d, table=tuple(table)) == pytest.approx(table, abs=1e-6)
+    one = confidence.calibrated(np.array([0.05]), table=tuple(table))[0]
+    assert one == pytest.approx((table[0] + table[1]) / 2)

@@ -207,5 +207,5 @@ def test_the_partial_shapes_limbs_map_onto_each_other_and_its_body_has_no_partne
     # a partial symmetry's map takes the partial symmetries' table, not the global maps'
     conf = result.symmetry_confidence()
     mapped = result.symmetry_map() >= 0
-    own = confidence.calibrated(result.symmetry_score(), partial=True)
+    own = confidence.calibrated(result.symmetry_score(), table=confidence.PARTIAL_CALIBRATION)
     assert np.allclose(conf[mapped], own[mapped], atol=1e-6) and not conf[~mapped].any()

@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 import intrinsym
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
+from intrinsym.globalmap import confidence
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.result import modes
@@ -51,6 +52,22 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
+def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, tmp_path):
+    """A part matched to its whole is told apart in run.json; its confidence is the
+    score through PART_CALIBRATION (fitted on SHREC'16 parts), not the complete shapes'
+    tables, and a loaded result says the same."""
+    half, whole, _ = half_and_whole
+    result = intrinsym.match(half, whole, intrinsym.make_params(n_source=30, n_target=300, passes=1))
+    assert result.info.part and result.calibration_table() is confidence.PART_CALIBRATION
+    mapped = result.symmetry_map() >= 0
+    own = confidence.calibrated(result.symmetry_score(), table=confidence.PART_CALIBRATION)
+    conf = result.symmetry_confidence()
+    assert mapped.any() and np.allclose(conf[mapped], own[mapped], atol=1e-6) and not conf[~mapped].any()
+    assert conf.max() <= max(confidence.PART_CALIBRATION)
+    back = intrinsym.Result.load(result.save(tmp_path / "out"))
+    assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
+
+
 @pytest.mark.slow  # two matches at 150 / 1500, the size its shares were measured at (CI: -m slow)
 def test_half_of_spot_matches_spot_within_005():
     """Spot with its half below z = 0 cut away, matched to spot: within 0.05 sqrt(area)
@@ -81,6 +98,7 @@ def test_a_symmetric_pair_reports_both_answers(tmp_path):
     a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
     result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500))
     assert result.params.unary == intrinsym.make_params().unary  # one whole shape and another
+    assert not result.info.part and result.calibration_table() is None
     two = modes.two_modes(result)
     assert two.both
     assert 0.3 <= two.confidence[0] <= 0.7 and two.confidence.sum() == pytest.approx(1.0)

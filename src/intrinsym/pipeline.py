@@ -572,12 +572,13 @@ def match(
     sa, sb = as_shape(a), as_shape(b)
     clock.lap("load")
     surf_a, surf_b = prepare_pair(sa, sb, _min_vertices(p), p.match_scale)
-    if min(surface_area(surf_a.shape), surface_area(surf_b.shape)) < PARTIAL_AREA:
+    part = min(surface_area(surf_a.shape), surface_area(surf_b.shape)) < PARTIAL_AREA
+    if part:
         p = dataclasses.replace(p, unary=p.partial_unary)
     clock.lap("prepare")
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")
-    header = {"mode": "match", "input": str(sa.path), "target_input": str(sb.path), "preset": preset}
+    header = {"mode": "match", "input": str(sa.path), "target_input": str(sb.path), "preset": preset, "part": part}
     return _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, header)
 
 

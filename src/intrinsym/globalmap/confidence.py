@@ -35,6 +35,7 @@ __all__ = [
     "CALIBRATION",
     "DISTORTION_BINS",
     "PARTIAL_CALIBRATION",
+    "PART_CALIBRATION",
     "Bin",
     "calibrated",
     "calibration",
@@ -86,6 +87,19 @@ CALIBRATION = (
 PARTIAL_CALIBRATION = (
     0.103, 0.103, 0.147, 0.178, 0.178, 0.221, 0.248, 0.276, 0.276, 0.276,
     0.334, 0.334, 0.334, 0.426, 0.426, 0.426, 0.426, 0.426, 0.426, 0.521,
+)  # fmt: skip
+
+
+#: The calibration of a part's map onto its whole (``match`` of a shape with less than
+#: ``PARTIAL_AREA`` of the other's area): the share of its vertices whose image lies
+#: within 0.05 sqrt(area) of the nearer of the true and the mirror point, per 1/20-wide
+#: bin of its score (value at the bin's centre), fitted (isotonic) over the 125 SHREC'16
+#: partial shapes matched to their null shapes by ``benchmarks/calibration.py --feature
+#: match_score``. It is flat: there 0.23 of the images are right, and the score does not
+#: tell which (the marginals of a part's unary are nearly flat); it says how often, not where.
+PART_CALIBRATION = (
+    0.223, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271,
+    0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271, 0.271,
 )  # fmt: skip
 
 
@@ -183,7 +197,9 @@ def distortion_group(distortion: np.ndarray | None, n: int) -> np.ndarray:
     return np.where(np.isnan(d), len(DISTORTION_BINS), np.digitize(d, DISTORTION_BINS)).astype(np.int64)
 
 
-def calibrated(mass: np.ndarray, distortion: np.ndarray | None = None, *, partial: bool = False) -> np.ndarray:
+def calibrated(
+    mass: np.ndarray, distortion: np.ndarray | None = None, *, table: tuple[float, ...] | None = None
+) -> np.ndarray:
     """Per-vertex confidence from :func:`score`: the probability that the vertex's image
     lies within 0.05 sqrt(area) of its true image.
 
@@ -195,25 +211,26 @@ def calibrated(mass: np.ndarray, distortion: np.ndarray | None = None, *, partia
         The global map's local distortion at every vertex
         (:func:`intrinsym.globalmap.distortion.local_distortion`, sqrt(area) units; NaN unknown);
         None: every vertex takes the first table.
-    partial : bool
-        The map is a partial symmetry's: every vertex takes :data:`PARTIAL_CALIBRATION`
-        (``distortion`` is ignored).
+    table : tuple of float, optional
+        One table every vertex takes instead (``distortion`` is ignored): a partial
+        symmetry's map, :data:`PARTIAL_CALIBRATION`; a part matched to its whole,
+        :data:`PART_CALIBRATION`.
 
     Returns
     -------
     (N,) float32 in [0, 1]
         Linear interpolation of the vertex's table of :data:`CALIBRATION`
-        (:func:`distortion_group`), or of :data:`PARTIAL_CALIBRATION`, between the bin
-        centres (constant beyond the first and last).
+        (:func:`distortion_group`), or of ``table``, between the bin centres (constant
+        beyond the first and last).
     """
     x = np.asarray(mass, dtype=np.float64)
-    if partial:
-        return _through(x, PARTIAL_CALIBRATION).astype(np.float32)
+    if table is not None:
+        return _through(x, table).astype(np.float32)
     group = distortion_group(distortion, len(x))
     out = np.empty(len(x))
-    for g, table in enumerate(CALIBRATION):
+    for g, tab in enumerate(CALIBRATION):
         inside = group == g
-        out[inside] = _through(x[inside], table)
+        out[inside] = _through(x[inside], tab)
     return out.astype(np.float32)
 
 

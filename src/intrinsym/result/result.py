@@ -26,7 +26,16 @@ from ..extract import records
 from ..extract.support import Support
 from ..extract.symmetry import Extraction, ExtractParams, Symmetry, with_inverse
 from ..files import Writer, npz_headers, save_npz, write_set
-from ..globalmap.confidence import calibrated, carried_confidence, disagreement, map_mass, round_trip, score
+from ..globalmap.confidence import (
+    PART_CALIBRATION,
+    PARTIAL_CALIBRATION,
+    calibrated,
+    carried_confidence,
+    disagreement,
+    map_mass,
+    round_trip,
+    score,
+)
 from ..globalmap.globalmap import supported_map
 from ..globalmap.vertex_maps import fitted_vertex_map
 from ..mrf import model
@@ -259,26 +268,35 @@ class Result:
 
     def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image
-        under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one
-        (``symmetry_confidence.npy``): :meth:`symmetry_score` through
+        under :meth:`symmetry_map` lies within 0.05 sqrt(area) of the true one (of either
+        answer, for a match) (``symmetry_confidence.npy``): :meth:`symmetry_score` through
         :func:`intrinsym.globalmap.confidence.calibrated`, by the map's local distortion
-        (:attr:`map_distortion`), or, for a partial symmetry's map of a shape onto itself,
-        through the partial symmetries' table; where no source sample's cell reaches (a
-        connected component without samples, carried there), that of the nearest vertex a
-        cell holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where the
-        map gives no image."""
+        (:attr:`map_distortion`), or through one table of its own for a partial
+        symmetry's map of a shape onto itself and for a part matched to its whole
+        (:meth:`calibration_table`); where no source sample's cell reaches (a connected
+        component without samples, carried there), that of the nearest vertex a cell
+        holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where the map
+        gives no image."""
         # map_distortion is that of global_map: without it, the map scored is another
         local = self.map_distortion if self.global_map is not None else None
-        conf = calibrated(self.symmetry_score(mass), local, partial=self._partial_map())
+        conf = calibrated(self.symmetry_score(mass), local, table=self.calibration_table())
         if self.support is not None and self.support.source_mesh_vertices is not None:
             conf = carried_confidence(conf, self.support.vertex_source, self.support.source_mesh_vertices)
         return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
 
-    def _partial_map(self) -> bool:
-        """Whether :meth:`symmetry_map` is a partial symmetry's map of a shape onto itself."""
+    def calibration_table(self) -> tuple[float, ...] | None:
+        """The one calibration table every vertex of :meth:`symmetry_map` takes, or None
+        (the tables of ``CALIBRATION`` by local distortion): ``PART_CALIBRATION`` for a
+        part matched to its whole (``info.part``), ``PARTIAL_CALIBRATION`` for a partial
+        symmetry's map of a shape onto itself (no global map; the dominant symmetry
+        partial)."""
+        if self.info.part:
+            return PART_CALIBRATION
         sym = None if self.extraction is None else self.extraction.dominant_symmetry
         self_match = self.support is not None and self.support.self_match
-        return self.global_map is None and self_match and sym is not None and sym.kind == "partial"
+        if self.global_map is None and self_match and sym is not None and sym.kind == "partial":
+            return PARTIAL_CALIBRATION
+        return None
 
     def global_confidence(self) -> float | None:
         """The expected share of vertices whose image lies within 0.05 sqrt(area) of the

@@ -246,6 +246,9 @@ class RunInfo:
     content_key : str or None
         Hash of the input bytes, the resolved parameters and the package version
         (``intrinsym batch`` skips an item whose folder holds its key).
+    part : bool
+        Match: the smaller shape was taken for a part of the larger (less than
+        ``PARTIAL_AREA`` of its area; one unit, ``partial_unary``).
     """
 
     mode: str
@@ -261,6 +264,7 @@ class RunInfo:
     global_map: GlobalMapStats | None = None
     versions: dict[str, str] = field(default_factory=dict)
     content_key: str | None = None
+    part: bool = False
 
     @property
     def no_partner(self) -> bool:
@@ -305,6 +309,7 @@ class RunInfo:
             global_map=GlobalMapStats(**global_map) if global_map else None,
             versions=dict(run.get("versions", {})),
             content_key=run.get("content_key"),
+            part=bool(run.get("part", False)),
         )
 
 
