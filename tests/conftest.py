@@ -46,6 +46,42 @@ def shared(relative: str) -> Path:
 BUDGET_S = 90.0
 
 
+#: Test modules that share a fixture of seconds (a detect, a browser) computed once per
+#: process: the scheduler below gives the modules of one group to one worker, which computes
+#: it once (plain ``load`` scheduling computed it on each worker that drew one of their
+#: tests). ``example_detected`` and ``browser`` are session fixtures of two modules each; the
+#: others hold module fixtures (``spot_result`` and ``spot_again``, ``star`` and ``figure``,
+#: ``mirror_results``, ``star``).
+SHARED_FIXTURE_GROUPS = {
+    "test_cli.py": "example_detected",
+    "test_reliability.py": "example_detected",
+    "test_viewer.py": "browser",
+    "test_export.py": "browser",
+    "test_pipeline.py": "test_pipeline.py",
+    "test_generated.py": "test_generated.py",
+    "test_unary.py": "test_unary.py",
+    "test_symmetry_group.py": "test_symmetry_group.py",
+}
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """For ``--dist load`` (the default with ``-n``): pytest-xdist's scope scheduling with one
+    work unit per group of :data:`SHARED_FIXTURE_GROUPS` and per other test, the groups
+    first (xdist sorts the units by their number of tests), so that the tail is single tests.
+    (``--dist loadgroup`` would do it by ``xdist_group`` marks, but pytest-xdist 3.8 renames
+    the node ids it groups by through ``Item._nodeid``, which pytest 9.2 no longer reads.)"""
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SharedFixtureScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0].rsplit("/", 1)[-1]
+            return SHARED_FIXTURE_GROUPS.get(module, nodeid)
+
+    return SharedFixtureScheduling(config, log)
+
+
 _STARTED = pytest.StashKey[float]()
 
 
