@@ -144,9 +144,10 @@ def truths(data: Path, names: list[str] | None) -> list[Truth]:
     chosen = complete if not names else [c for c in complete if c.name in names or c.cls in names]
     found = partial.shapes(data)
     rest = [n for n in names or [] if n not in known]
+    unknown = [n for n in rest if not partial.select(found, [n])]
+    if unknown:
+        raise SystemExit(f"unary_partner.py: unknown shape(s) {', '.join(unknown)}")
     partials = found if not names else (partial.select(found, rest) if rest else [])
-    if names and rest and not partials:
-        raise SystemExit(f"unary_partner.py: unknown shape(s) {', '.join(rest)}")
     return [complete_truth(c) for c in chosen] + [partial_shape_truth(p) for p in partials]
 
 
