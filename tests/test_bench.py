@@ -3,9 +3,12 @@ the small mode runs end to end (a smoke test, no timing asserts)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import os
 
 import numpy as np
+import pytest
 
 from intrinsym.app import bench
 from intrinsym.app.cli import main
@@ -50,3 +53,16 @@ def test_bench_profile_json(capsys):
     assert prof["working_vertices"] >= 1200  # spot, 2,930 vertices, is not subdivided at 40 / 400
     lines = bench.profile_lines(bench.Profile(**prof))
     assert lines[0].startswith(prof["mesh"]) and any(line.lstrip().startswith("bp:") for line in lines)
+
+
+class _ExitOnLoad:
+    """Unpickled in the child as ``os._exit(3)``: a case whose process dies before it reports."""
+
+    def __reduce__(self):
+        return os._exit, (3,)
+
+
+def test_a_case_whose_process_dies_is_an_error_not_a_hang():
+    case = dataclasses.replace(bench.SMALL[0], mesh=_ExitOnLoad())
+    with pytest.raises(RuntimeError, match=r"small: the benchmark process ended without a result \(exit code 3\)"):
+        bench.run([case])

@@ -16,6 +16,8 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from queue import Empty
+from typing import Any
 
 import numpy as np
 from scipy.spatial.distance import cdist
@@ -28,6 +30,9 @@ from ..progress import BPIteration, ProgressEvent, StageDone
 from ..spectral import laplacian
 from ..surface import as_shape, prepare
 from ..unary import descriptors, unary
+
+#: How often (seconds) the parent checks that a case's child process is still alive.
+_POLL_SECONDS = 1.0
 
 
 @dataclass(frozen=True)
@@ -199,6 +204,23 @@ def _child(case: Case, iterations: int, n_messages: int, queue) -> None:
         queue.put(("error", f"{case.name}: {type(err).__name__}: {err}"))
 
 
+def _next_message(queue, proc, name: str) -> tuple[str, Any]:
+    """The child's next message; RuntimeError once it has ended without one (killed, or
+    dead before it could report), instead of waiting for ever."""
+    while True:
+        try:
+            return queue.get(timeout=_POLL_SECONDS)
+        except Empty:
+            if proc.is_alive():
+                continue
+        try:  # a message sent just before the exit may still be in the pipe
+            return queue.get(timeout=_POLL_SECONDS)
+        except Empty:
+            proc.join()
+            code = proc.exitcode
+            raise RuntimeError(f"{name}: the benchmark process ended without a result (exit code {code})") from None
+
+
 def run(
     cases: Sequence[Case],
     iterations: int = 100,
@@ -228,7 +250,7 @@ def run(
         proc = ctx.Process(target=_child, args=(case, iterations, n_messages, queue))
         proc.start()
         while True:
-            kind, payload = queue.get()
+            kind, payload = _next_message(queue, proc, case.name)
             if kind == "log":
                 if log is not None:
                     log(case.name, payload)
