@@ -120,7 +120,8 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         parts = best_parts(result, len(vmap))
         iou = 0.0 if parts is None else partial_truth.part_iou(parts, truth)
         row["coverage"] = float((vmap >= 0).mean())
-        row["confidence"] = confidence_row(result.symmetry_confidence(), vmap, truth, scores)
+        scored, right = _right(vmap, truth, scores)  # right: partnered, within 0.05 of the partner
+        row["confidence"] = confidence_row(result.symmetry_confidence()[scored], right)
         row["reliability"] = reliability(result, vmap, truth, scores)
     row.update(scores.as_dict(), iou=iou)
     return row
@@ -156,17 +157,13 @@ def reliability(
     return {"partial_score" if sym.kind == "partial" else "score": histogram}
 
 
-def confidence_row(
-    conf: np.ndarray, vmap: np.ndarray, truth: partial_truth.PartialTruth, scores: partial_truth.PartialMapScores
-) -> dict:
-    """The confidence's calibration over the scored vertices with an image: right when
-    partnered and within 0.05 of the partner (``scores``; a vertex without a partner has
-    no right image)."""
-    scored, right = _right(vmap, truth, scores)
-    if not scored.any():
+def confidence_row(conf: np.ndarray, right: np.ndarray) -> dict:
+    """A confidence's calibration over the vertices it is given: ECE, mean and count;
+    ``right`` says which of their images are right."""
+    if not len(conf):
         return {"ece": None, "mean": None, "n": 0}
-    ece, _ = confidence.calibration(conf[scored], right)
-    return {"ece": ece, "mean": float(conf[scored].mean()), "n": int(scored.sum())}
+    ece, _ = confidence.calibration(conf, right)
+    return {"ece": ece, "mean": float(conf.mean()), "n": int(len(conf))}
 
 
 def _cache_file(cache: Path, path: Path, method: str) -> Path:

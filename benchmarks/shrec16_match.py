@@ -41,10 +41,9 @@ from scipy.spatial import cKDTree
 
 import intrinsym
 from intrinsym.evaluation import evaluate, partial_truth
-from intrinsym.globalmap import confidence
 from intrinsym.mesh.shape import surface_area
 from intrinsym.result import modes
-from partial import _group, _value, run_script
+from partial import _group, _value, confidence_row, run_script
 from tosca import score_histogram
 
 #: Cache-format revision: a file with another one is recomputed.
@@ -161,15 +160,6 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     row["coverage"] = float(mapped.mean())
     row["mean_error"] = float(errors[mapped].mean()) if mapped.any() else None
     return row
-
-
-def confidence_row(conf: np.ndarray, right: np.ndarray) -> dict:
-    """The map's confidence (``symmetry_confidence``) against its images within 0.05 of the
-    nearer answer, over the mapped vertices: ECE, mean and count."""
-    if not len(conf):
-        return {"ece": None, "mean": None, "n": 0}
-    ece, _ = confidence.calibration(conf, right)
-    return {"ece": ece, "mean": float(conf.mean()), "n": int(len(conf))}
 
 
 def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:
