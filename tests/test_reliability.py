@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -143,6 +144,25 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path):
     assert proc.returncode == 143, err
     assert err.strip().splitlines()[-1] == "intrinsym: terminated"
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no result, no temporary, no lock
+
+
+def test_sigterm_inside_llvmlite_is_sent_again_not_raised(monkeypatch):
+    """An exception cannot leave llvmlite's ctypes callbacks (a SIGTERM while Numba compiles
+    on a first run crashed the process with a segmentation fault): there the handler sends
+    the signal again a moment later; anywhere else it raises Terminated."""
+    sent = []
+    monkeypatch.setattr(cli.os, "kill", lambda pid, signum: sent.append((pid, signum)))
+    caller = types.SimpleNamespace(f_globals={"__name__": "numba.core.codegen"}, f_back=None)
+    callback = types.SimpleNamespace(f_globals={"__name__": "llvmlite.binding.executionengine"}, f_back=caller)
+    cli._terminate(signal.SIGTERM, callback)
+    deadline = time.monotonic() + 10
+    while not sent and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert sent == [(os.getpid(), signal.SIGTERM)]
+    with pytest.raises(cli.Terminated):
+        cli._terminate(signal.SIGTERM, types.SimpleNamespace(f_globals={"__name__": "numba.core"}, f_back=None))
+    with pytest.raises(cli.Terminated):
+        cli._terminate(signal.SIGTERM, None)
 
 
 def test_generate_refuses_sizes_that_do_not_fit(tmp_path, capsys):

@@ -7,11 +7,14 @@ import contextlib
 import dataclasses
 import functools
 import json
+import os
 import re
 import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
+from types import FrameType
 
 import numpy as np
 from rich.console import Console
@@ -549,7 +552,22 @@ class Terminated(KeyboardInterrupt):
     files removed, the progress display stopped)."""
 
 
-def _terminate(signum: int, frame: object) -> None:
+#: Seconds after which a SIGTERM that arrived inside llvmlite is sent again.
+RESEND_SECONDS = 0.1
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    """Raise :class:`Terminated` in the frame the signal interrupted, unless that frame runs
+    inside llvmlite (Numba compiling its kernels, on a first run): an exception cannot leave
+    llvmlite's ctypes callbacks, it is dropped there and the process later dies of a
+    segmentation fault. There the signal is sent again a moment later, until it lands outside."""
+    while frame is not None:
+        if str(frame.f_globals.get("__name__", "")).startswith("llvmlite"):
+            resend = threading.Timer(RESEND_SECONDS, os.kill, (os.getpid(), signum))
+            resend.daemon = True  # a run that ends first is not signalled after it
+            resend.start()
+            return
+        frame = frame.f_back
     raise Terminated
 
 
