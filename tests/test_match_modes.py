@@ -14,6 +14,7 @@ from intrinsym.geodesics import geodesics
 from intrinsym.globalmap import confidence
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
+from intrinsym.pipeline import invert_part_match
 from intrinsym.result import modes
 from intrinsym.surface import prepare_pair
 
@@ -68,6 +69,24 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, t
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
 
 
+def test_a_whole_matched_to_its_part_leaves_the_cut_away_part_unmatched(half_and_whole, tmp_path):
+    """match(whole, part): the whole's vertices cut away on the part (below z = -0.1) get
+    "no match" (-1), the others keep an image (a band of 0.1 either side not scored); the
+    map is that of the part's own match to the whole inverted, and a loaded result keeps it."""
+    half, whole, _ = half_and_whole
+    p = intrinsym.make_params(n_source=40, n_target=400, passes=1)
+    result = intrinsym.match(whole, half, p)
+    assert result.info.part and result.info.target_part and "reverse match" in result.info.seconds
+    found = result.symmetry_map()
+    z = whole.vertices[:, 2]
+    assert np.mean(found[z < -0.2] == -1) >= 0.85
+    assert np.mean(found[z > 0.0] >= 0) >= 0.9
+    assert np.array_equal(found, invert_part_match(intrinsym.match(half, whole, p), half, whole))
+    back = intrinsym.Result.load(result.save(tmp_path / "out"))
+    assert back.info.target_part and np.array_equal(back.symmetry_map(), found)
+    assert not back.symmetry_confidence()[found < 0].any()
+
+
 @pytest.mark.slow  # two matches at 150 / 1500, the size its shares were measured at (CI: -m slow)
 def test_half_of_spot_matches_spot_within_005():
     """Spot with its half below z = 0 cut away, matched to spot: within 0.05 sqrt(area)
@@ -99,6 +118,8 @@ def test_a_symmetric_pair_reports_both_answers(tmp_path):
     result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500))
     assert result.params.unary == intrinsym.make_params().unary  # one whole shape and another
     assert not result.info.part and result.calibration_table() is None
+    # a complete pair: no inverse map, every vertex keeps an image
+    assert not result.info.target_part and result.global_map is None and np.all(result.symmetry_map() >= 0)
     two = modes.two_modes(result)
     assert two.both
     assert 0.3 <= two.confidence[0] <= 0.7 and two.confidence.sum() == pytest.approx(1.0)

@@ -1,4 +1,5 @@
-"""A dense map carried onto the connected components the model does not see."""
+"""A dense map carried onto the connected components the model does not see, and a
+part's map into its whole inverted."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from scipy.spatial import cKDTree
 import intrinsym
 from conftest import mirror_shape
 from intrinsym.globalmap.globalmap import carried_map
-from intrinsym.globalmap.vertex_maps import carried_to_components
+from intrinsym.globalmap.vertex_maps import carried_to_components, inverse_vertex_map
 from intrinsym.mesh.shape import from_arrays
 from intrinsym.surface import prepare
 
@@ -119,3 +120,33 @@ def test_detect_carries_the_global_map_onto_parts_without_samples():
     assert not seen.all()
     nearest = cKDTree(v[seen]).query(v[~seen])[1]
     np.testing.assert_array_equal(conf[~seen], conf[seen][nearest])
+
+
+def _strip() -> tuple[np.ndarray, np.ndarray]:
+    """100 vertices along x in [0, 1), 0.01 apart, each standing for an area of 0.01."""
+    return np.column_stack([np.arange(100) * 0.01, np.zeros(100), np.zeros(100)]), np.full(100, 0.01)
+
+
+def test_the_inverse_covers_the_parts_area_near_its_images():
+    """A part of area 0.5 (and half a vertex) whose 25 vertices map, a little compressed, onto x in [0, 0.36]
+    of the strip: its counterpart is the half nearest the images (x < 0.5, the images
+    spread to the part's area), the rest "no match"; each covered vertex takes the part
+    vertex whose image lies nearest."""
+    whole, area = _strip()
+    image = np.arange(25) * 3 // 2  # x = 0.00, 0.01, 0.03, ... 0.36
+    out = inverse_vertex_map(image, whole, area, 0.505, reach=0.2)
+    assert np.all(out[:50] >= 0) and np.all(out[50:] == -1)
+    assert np.array_equal(out[image], np.arange(25))
+    # the reach stops a collapsed map: within 0.025 of the images only
+    assert np.array_equal(inverse_vertex_map(image, whole, area, 0.505, reach=0.025) >= 0, np.arange(100) <= 38)
+    # and the part's area a spread one: a part of area 0.2 covers the 20 vertices nearest
+    assert np.sum(inverse_vertex_map(image, whole, area, 0.205, reach=0.2) >= 0) == 20
+
+
+def test_the_inverse_prefers_the_centres_among_part_vertices_sharing_an_image():
+    whole, area = _strip()
+    image = np.array([5, 5, 5, -1, 40])
+    assert inverse_vertex_map(image, whole, area, 0.02, reach=0.1)[5] == 0  # the lowest index
+    out = inverse_vertex_map(image, whole, area, 0.02, reach=0.1, centres=np.array([2, 4]))
+    assert out[5] == 2 and out[40] == 4 and np.sum(out >= 0) == 2
+    assert np.all(inverse_vertex_map(np.full(5, -1), whole, area, 0.5, reach=0.1) == -1)

@@ -28,7 +28,8 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .mesh.shape import surface_area
+from .globalmap.vertex_maps import inverse_vertex_map
+from .mesh.shape import surface_area, vertex_areas
 from .mrf import bp, model
 from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, PARTIAL_AREA, WORK_PER_SAMPLE, Params, make_params
 from .problem import Problem, sampled
@@ -565,6 +566,15 @@ def match(
     is not the whole's). Otherwise each is normalised to unit area, so near-isometric
     frames of one object match whatever their units (``params.match_scale`` decides).
     Parameters as in :func:`detect`; the trivial match does not apply.
+
+    When the target B is the part (A the whole), every source sample still takes a label,
+    so A's vertices cut away on B would get an image too. The result's vertex map
+    (``global_map``, :meth:`~intrinsym.result.result.Result.symmetry_map`) is then the
+    inverse of B's own match to A, that of ``match(b, a)``
+    (:func:`~intrinsym.globalmap.vertex_maps.inverse_vertex_map`): -1 ("no match") on
+    the vertices of A that B's image does not cover. The marginals, the extraction and
+    the modes stay those of A to B; the second solve costs about as much as the first
+    (``run.json``: ``target_part``, the stage ``reverse match``).
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
     check_machine(p)
@@ -572,14 +582,70 @@ def match(
     sa, sb = as_shape(a), as_shape(b)
     clock.lap("load")
     surf_a, surf_b = prepare_pair(sa, sb, _min_vertices(p), p.match_scale)
-    part = min(surface_area(surf_a.shape), surface_area(surf_b.shape)) < PARTIAL_AREA
+    area_a, area_b = surface_area(surf_a.shape), surface_area(surf_b.shape)
+    part = min(area_a, area_b) < PARTIAL_AREA
     if part:
         p = dataclasses.replace(p, unary=p.partial_unary)
     clock.lap("prepare")
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")
     header = {"mode": "match", "input": str(sa.path), "target_input": str(sb.path), "preset": preset, "part": part}
-    return _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, header)
+    result = _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, header)
+    if not (part and area_b < area_a):
+        return result
+    # The target is the part: every source sample takes a label, so the source vertices
+    # cut away on the target would get one too. The part's own match to the whole (what
+    # match(b, a) computes) covers those that have a counterpart; the rest get -1.
+    back_header = {"mode": "match", "input": str(sb.path), "target_input": str(sa.path), "preset": preset, "part": part}
+    back = _solve(sampled(surf_b, surf_a, *sample_pair(surf_b, surf_a, p), p, False), p, _Clock(None), back_header)
+    image = invert_part_match(back, sb, sa)
+    clock.lap("reverse match")
+    info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True)
+    return dataclasses.replace(result, global_map=image, info=info)
+
+
+#: The counterpart of a part on its whole lies within this many of the part's sample
+#: spacings of the part's images (:func:`invert_part_match`): a map that collapses the
+#: part onto a small region leaves the rest of the whole unmatched. Fewer leave more of
+#: the part's counterpart unmatched, more cover more of what was cut away (the SHREC'16
+#: reverse table of docs/results.md, at 1 to 4 spacings and without a reach).
+COVER_SPACINGS = 2.0
+
+
+def invert_part_match(back: Result, part: ShapeLike, whole: ShapeLike, spacings: float = COVER_SPACINGS) -> np.ndarray:
+    """The whole's vertices mapped onto the part, from the part's match to the whole:
+    what ``match(whole, part)`` returns as its vertex map.
+
+    Parameters
+    ----------
+    back : Result
+        Of ``match(part, whole)`` (the part's samples, the whole's labels).
+    part, whole : path, Shape, (vertices, faces) tuple, (N, 3) array or trimesh object
+        Its two inputs.
+    spacings : float
+        The counterpart's reach from the part's images, in the part's sample spacings
+        (the median source-graph edge).
+
+    Returns
+    -------
+    (N_whole,) int64
+        Part vertex of every vertex of the whole, -1 ("no match") where the part has no
+        counterpart: ``back``'s vertex map inverted
+        (:func:`~intrinsym.globalmap.vertex_maps.inverse_vertex_map`, the counterpart as
+        large as the part).
+    """
+    if back.support is None:
+        raise ValueError("the result has no support (geodesics) to measure its sample spacing")
+    sp, sw = as_shape(part), as_shape(whole)
+    spacing = float(np.median(back.support.edge_length)) * back.info.resolved.scale  # input units
+    return inverse_vertex_map(
+        back.symmetry_map(),
+        sw.vertices,
+        vertex_areas(sw),
+        surface_area(sp),
+        spacings * spacing,
+        back.source_point_vertex,
+    )
 
 
 def extract_result(result: Result) -> Extraction:

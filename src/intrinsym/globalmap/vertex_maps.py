@@ -3,7 +3,8 @@
 :func:`vertex_map` gives each input vertex the image of the source sample whose
 geodesic Voronoi cell holds it; :func:`fitted_vertex_map` refines that by local linear
 fits (beyond the paper); :func:`carried_to_components` carries a dense map onto the
-connected components the model does not see.
+connected components the model does not see; :func:`inverse_vertex_map` inverts a map of
+a part into its whole, "no match" where the part has no counterpart.
 """
 
 from __future__ import annotations
@@ -195,4 +196,61 @@ def carried_to_components(
             fits.append((forward[0].mean() + moved_tree.query(positions[parts[j]])[0].mean(), forward[1]))
         best = int(np.argmin([cost for cost, _ in fits]))
         out[members] = parts[options[best]][fits[best][1]]
+    return out
+
+
+def inverse_vertex_map(
+    image: np.ndarray,
+    vertices: np.ndarray,
+    vertex_area: np.ndarray,
+    part_area: float,
+    reach: float,
+    centres: np.ndarray | None = None,
+) -> np.ndarray:
+    """A map of a part into its whole, inverted: "no match" where the part has no counterpart.
+
+    The part's counterpart on the whole has the part's area (the match is near
+    isometric), and lies where the part's vertices map: the whole's vertices nearest an
+    image (straight line), up to ``part_area`` of them and none farther than ``reach``
+    from every image, take the part vertex whose image lies nearest; the others, cut away
+    on the part, take -1 ("no match"). ``reach`` keeps a map that collapses the part onto
+    a small region from claiming the whole's vertices around it. Among the part vertices
+    that share an image, the first of ``centres`` (a map extended from samples sends each
+    sample's cell to one vertex: the sample stands for it), else the lowest index.
+
+    Parameters
+    ----------
+    image : (M,) int array
+        The map being inverted: vertex of the whole of every part vertex, -1 for none.
+    vertices : (N, 3) float array
+        Positions of the whole's vertices.
+    vertex_area : (N,) float array
+        Area each of them stands for (:func:`intrinsym.mesh.shape.vertex_areas`), in the
+        square of the positions' unit.
+    part_area : float
+        The part's area, in the same unit.
+    reach : float
+        The farthest a vertex of the counterpart lies from an image, in the positions' unit.
+    centres : (S,) int array, optional
+        Part vertices preferred among those that share an image.
+
+    Returns
+    -------
+    (N,) int64
+        Part vertex of every vertex of the whole, -1 where it has no counterpart.
+    """
+    image = np.asarray(image, dtype=np.int64)
+    out = np.full(len(vertices), -1, dtype=np.int64)
+    first = np.zeros(len(image), dtype=bool) if centres is None else np.isin(np.arange(len(image)), centres)
+    order = np.argsort(~first, kind="stable")  # the centres first, each group by index
+    hit, at = np.unique(image[order], return_index=True)
+    keep = hit >= 0
+    hit, owner = hit[keep], order[at[keep]]
+    if not len(hit):
+        return out
+    dist, nearest = cKDTree(np.asarray(vertices, dtype=np.float64)[hit]).query(vertices)
+    rank = np.argsort(dist, kind="stable")
+    count = np.searchsorted(np.cumsum(np.asarray(vertex_area, dtype=np.float64)[rank]), part_area, side="right")
+    covered = rank[: min(count, int(np.sum(dist <= reach)))]
+    out[covered] = owner[nearest[covered]]
     return out

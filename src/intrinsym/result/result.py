@@ -259,12 +259,12 @@ class Result:
         on its image and, for a reflection, how far the map applied twice returns it
         (:func:`intrinsym.globalmap.confidence.score`); uncalibrated."""
         mass = self.symmetry_mass() if mass is None else mass
-        images = None if self.support is None else self.support.target_mesh_vertices
-        if images is None or self.global_map is None:
+        if self.support is None or self.support.target_mesh_vertices is None or self.global_map is None:
             return np.asarray(mass, dtype=np.float64)
-        image, scale = self.symmetry_map(), self.info.resolved.scale
+        images, image, scale = self.support.target_mesh_vertices, self.symmetry_map(), self.info.resolved.scale
         apart = disagreement(images, image, self.extraction_map(), scale)
-        return score(mass, apart, round_trip(images, image, scale))
+        # a map onto another shape (a whole onto its part) has no round trip
+        return score(mass, apart, round_trip(images, image, scale) if self.support.self_match else None)
 
     def symmetry_confidence(self, mass: np.ndarray | None = None) -> np.ndarray:
         """(N_in,) float32 in [0, 1]: per input vertex, the probability that its image

@@ -249,6 +249,10 @@ class RunInfo:
     part : bool
         Match: the smaller shape was taken for a part of the larger (less than
         ``PARTIAL_AREA`` of its area; one unit, ``partial_unary``).
+    target_part : bool
+        Match: the target is that part (the source the whole); the result's
+        ``global_map`` is the inverse of the part's own match to the whole, -1 ("no
+        match") where the source has no counterpart on the part.
     """
 
     mode: str
@@ -265,6 +269,7 @@ class RunInfo:
     versions: dict[str, str] = field(default_factory=dict)
     content_key: str | None = None
     part: bool = False
+    target_part: bool = False
 
     @property
     def no_partner(self) -> bool:
@@ -310,6 +315,7 @@ class RunInfo:
             versions=dict(run.get("versions", {})),
             content_key=run.get("content_key"),
             part=bool(run.get("part", False)),
+            target_part=bool(run.get("target_part", False)),
         )
 
 
