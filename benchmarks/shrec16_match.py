@@ -14,7 +14,18 @@ and mirror points lie more than 0.10 apart, the share whose first-pass marginal 
 at least 0.1 of its mass within 0.05 of each ("both modes"), of the true one alone and
 of the mirror one alone; the two maps of :func:`intrinsym.result.modes.two_modes` (mode 0
 within 0.10 of the true point, mode 1 within 0.10 of the mirror, each on its own) and
-their confidences. Command::
+their confidences.
+
+The reverse direction, ``match(null, partial)``, whose vertex map is the inverse of this
+run's (:func:`intrinsym.pipeline.invert_part_match`, what ``match`` computes for a part
+target; so it is scored from this run rather than solved again): per shape, the
+convention (true or mirror answer) under which more of the matched null vertices lie
+within 0.10 of their image's answer point; under it, the null vertices farther than
+:data:`CUT` from every partial vertex's answer point (cut away) and those within
+:data:`KEPT` (kept; the band between is not scored); the share of the cut-away ones left
+unmatched (-1), of the kept ones matched, and of the matched kept ones within 0.10 of the
+nearer answer; and the same shares at other reaches of the inversion (:data:`REACHES`,
+the margin of ``COVER_SPACINGS``), in a second table. Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/shrec16_match.py --data DATA [--cache DIR --tag TAG]
         [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [-o TABLE.md]
@@ -42,6 +53,7 @@ from scipy.spatial import cKDTree
 import intrinsym
 from intrinsym.evaluation import evaluate, partial_truth
 from intrinsym.mesh.shape import surface_area
+from intrinsym.pipeline import COVER_SPACINGS, invert_part_match
 from intrinsym.result import modes
 from partial import _group, _value, confidence_row, run_script
 from tosca import score_histogram
@@ -55,6 +67,12 @@ FAR = 0.10
 #: ... and its marginal holds at least MODE_MASS within MODE_RADIUS of each.
 MODE_MASS = 0.1
 MODE_RADIUS = 0.05
+#: A null vertex farther than CUT from every partial vertex's answer point is cut away,
+#: one within KEPT is kept (issue 46's protocol band, partial_truth.PARTNERED / UNPARTNERED).
+KEPT, CUT = partial_truth.PARTNERED, partial_truth.UNPARTNERED
+#: The inversion's reaches (sample spacings) scored: the default's and others (its margin).
+REACHES = (1.0, 1.5, 2.0, 3.0, 4.0, float("inf"))
+assert COVER_SPACINGS in REACHES
 #: Scores of a row, with their table headers; the methods that have them.
 SCORES = (
     ("within_005", "≤0.05", ("intrinsym", "pyfm")),
@@ -66,6 +84,9 @@ SCORES = (
     ("mode0_true_010", "mode 0 ≤0.10 true", ("intrinsym",)),
     ("mode1_mirror_010", "mode 1 ≤0.10 mirror", ("intrinsym",)),
     ("confidence0", "confidence mode 0", ("intrinsym",)),
+    ("cut_unmatched", "reverse: cut-away unmatched", ("intrinsym",)),
+    ("kept_matched", "reverse: kept matched", ("intrinsym",)),
+    ("reverse_within_010", "reverse: matched kept ≤0.10", ("intrinsym",)),
     ("seconds", "seconds", ("intrinsym", "pyfm")),
 )
 
@@ -116,6 +137,46 @@ def mode_masses(result: intrinsym.Result, true: np.ndarray, mirror: np.ndarray, 
     return mass(true), mass(mirror)
 
 
+def reverse_scores(vmap: np.ndarray, true: np.ndarray, mirror: np.ndarray, graph) -> dict:
+    """Scores of a map of the null shape onto the partial one (``match(null, partial)``).
+
+    Parameters
+    ----------
+    vmap : (N_null,) int64
+        Partial vertex of every null vertex, -1 for "no match".
+    true, mirror, graph
+        As in :func:`mode_masses`.
+
+    Returns
+    -------
+    dict
+        ``convention`` ("true" or "mirror": the answer more matched null vertices lie
+        within 0.10 of), ``cut_unmatched`` (share of the cut-away null vertices, farther
+        than :data:`CUT` from every answer point of that convention, left unmatched; None
+        when none is), ``kept_matched`` (share of those within :data:`KEPT` matched) and
+        ``reverse_within_010`` (share of the matched kept ones whose image's nearer answer
+        point lies within 0.10 of them; None when none is matched).
+    """
+    matched = np.flatnonzero(vmap >= 0)
+    error = {}
+    for name, answer in (("true", true), ("mirror", mirror)):
+        error[name] = np.full(len(vmap), np.inf)
+        error[name][matched] = evaluate.map_errors(answer[vmap[matched]], matched, graph)
+    agree = {name: float(np.mean(e[matched] <= 0.10)) if len(matched) else 0.0 for name, e in error.items()}
+    convention = "true" if agree["true"] >= agree["mirror"] else "mirror"
+    answer = true if convention == "true" else mirror
+    near = dijkstra(graph, indices=np.unique(answer), min_only=True, limit=CUT * 1.01)
+    cut, kept, mapped = near > CUT, near <= KEPT, vmap >= 0
+    right = np.minimum(error["true"], error["mirror"]) <= 0.10
+    return {
+        "convention": convention,
+        "cut_vertices": int(cut.sum()),
+        "cut_unmatched": float(np.mean(~mapped[cut])) if cut.any() else None,
+        "kept_matched": float(np.mean(mapped[kept])) if kept.any() else None,
+        "reverse_within_010": float(np.mean(right[kept & mapped])) if (kept & mapped).any() else None,
+    }
+
+
 def run(path: Path, method: str, overrides: Mapping) -> dict:
     """One shape matched to its null shape under ``method`` ("intrinsym" or "pyfm")."""
     shape = intrinsym.load(path)
@@ -148,6 +209,12 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         row["both_modes"] = float(np.mean(at_true & at_mirror)) if far.any() else None
         row["true_only"] = float(np.mean(at_true & ~at_mirror)) if far.any() else None
         row["mirror_only"] = float(np.mean(~at_true & at_mirror)) if far.any() else None
+        start = time.perf_counter()
+        invert_part_match(result, shape, null)
+        row["reverse_seconds"] = time.perf_counter() - start
+        row["reaches"] = {
+            str(k): reverse_scores(invert_part_match(result, shape, null, k), true, mirror, graph) for k in REACHES
+        }
     errors = np.minimum(evaluate.map_errors(vmap, true, graph), evaluate.map_errors(vmap, mirror, graph))
     if result is not None:
         mapped = vmap >= 0
@@ -163,7 +230,10 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
 
 
 def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:
-    """The table: a row per shape, then mean and worst per kind, per class and overall."""
+    """The table: a row per shape, then mean and worst per kind, per class and overall;
+    then the reverse scores at every reach (:func:`reach_table`)."""
+    # the reverse scores at the default reach
+    rows = {k: {**r, **r.get("reaches", {}).get(str(COVER_SPACINGS), {})} for k, r in rows.items()}
     columns = [(key, m) for key, _, have in SCORES for m in methods if m in have]
     labels = {key: label for key, label, _ in SCORES}
     head = ["shape", *(f"{labels[key]} ({m})" for key, m in columns)]
@@ -189,6 +259,28 @@ def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[
         if len(members) > 1:
             lines.append("| " + " | ".join([f"**mean {g}** ({len(members)})", *cells(members, False)]) + " |")
             lines.append("| " + " | ".join([f"worst {g}", *cells(members, True)]) + " |")
+    lines += ["", reach_table(rows, names) if "intrinsym" in methods else ""]
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def reach_table(rows: dict[tuple[str, str], dict], names: list[str]) -> str:
+    """The reverse scores at every reach of :data:`REACHES` (the default's marked): mean
+    and worst shape over cuts, holes and all shapes."""
+    head = ["reach (sample spacings)"]
+    kinds = {"cuts": [n for n in names if n.startswith("cuts")], "holes": [n for n in names if n.startswith("holes")]}
+    kinds["all"] = names
+    for kind in kinds:
+        head += [f"cut-away unmatched, {kind} (mean / worst)", f"kept matched, {kind} (mean / worst)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for k in REACHES:
+        cells = [f"**{k:g}** (default)" if k == COVER_SPACINGS else f"{k:g}"]
+        for members in kinds.values():
+            for key in ("cut_unmatched", "kept_matched"):
+                v = np.array(
+                    [_value((rows.get((n, "intrinsym")) or {}).get("reaches", {}).get(str(k)), key) for n in members]
+                )
+                cells.append("–" if np.all(np.isnan(v)) else f"{np.nanmean(v):.3f} / {np.nanmin(v):.3f}")
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
