@@ -2,7 +2,8 @@
 
 ``intrinsym.prepare`` cleans the mesh, normalises it to unit area and builds its geodesic
 graph; ``intrinsym.detect`` accepts the prepared surface, so each value of the sweep skips that
-work. The sweep below varies ``rho``, the truncation of the pairwise term (paper Eq. 6: how much
+work, and the Laplace-Beltrami eigenpairs the first detect solves on it serve the others.
+The sweep below varies ``rho``, the truncation of the pairwise term (paper Eq. 6: how much
 a pair of samples may break geodesic consistency before the model stops caring), and prints,
 for every value, what BP did, what was found, and how isometric the found map is (its mean
 local distortion, ``intrinsym.map_distortion``: no ground truth needed). Any other field of
@@ -50,7 +51,7 @@ def sweep(mesh: str, name: str, values: list[float], base: intrinsym.Params) -> 
         local distortion of the map, and the seconds ``detect`` took.
     """
     shape = intrinsym.load(mesh)
-    surface = intrinsym.prepare(shape, base)  # cleaned, unit area, geodesic graph: done once
+    surface = intrinsym.prepare(shape, base)  # cleaned, unit area, geodesic graph, eigenpairs: once
     rows = []
     for value in values:
         params = dataclasses.replace(base, **{name: value})

@@ -21,6 +21,7 @@ from intrinsym.mesh.shape import Shape, surface_area
 from intrinsym.mrf import bp
 from intrinsym.params import MAP_MARGIN
 from intrinsym.result.runinfo import FORMAT_VERSION
+from intrinsym.spectral import laplacian
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
 
@@ -259,6 +260,21 @@ def test_deterministic_for_a_seed(spot, spot_result, spot_again):
     assert np.array_equal(again.marginals, spot_result.marginals)
     other = intrinsym.detect(spot, intrinsym.make_params(seed=1, **SMALL))
     assert not np.array_equal(other.source_point_vertex, spot_result.source_point_vertex)
+
+
+def test_the_detects_of_one_prepared_surface_share_its_eigenpairs(spot_result, spot_again, monkeypatch):
+    surface, _ = spot_again  # its detect solved the eigenpairs
+    p = intrinsym.make_params(**SMALL)
+    evals, evecs = surface.eigenpairs(min(p.eigenpairs, len(surface.shape.vertices) - 1), p.eigen_coarse)
+    assert not evals.flags.writeable and not evecs.flags.writeable
+
+    def solve_again(*args):
+        raise AssertionError("the eigenpairs were solved again")
+
+    monkeypatch.setattr(laplacian, "eigenpairs", solve_again)
+    again = intrinsym.detect(surface, p)
+    assert np.array_equal(again.marginals, spot_result.marginals)
+    assert np.array_equal(again.symmetry_map(), spot_result.symmetry_map())
 
 
 def _timeless(doc):

@@ -462,7 +462,9 @@ def prepare(
     while it has fewer than ``WORK_PER_SAMPLE max(n_source, n_target)`` vertices (a mesh; a point cloud
     is never subdivided), with its geodesic graph and normals: what :func:`detect` does
     before sampling. ``detect(prepare(shape, p), p)`` equals ``detect(shape, p)`` exactly,
-    so a parameter sweep prepares once.
+    so a parameter sweep prepares once; the surface also keeps the Laplace-Beltrami
+    eigenpairs its first detect solves (:meth:`intrinsym.Surface.eigenpairs`), for
+    the detects after it with the same ``eigenpairs`` and ``eigen_coarse``.
 
     Parameters
     ----------

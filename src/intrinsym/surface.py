@@ -22,6 +22,7 @@ from .geodesics import geodesics
 from .mesh import io, sampling
 from .mesh.shape import Shape, clean, from_arrays, surface_area, vertex_normals
 from .params import PARTIAL_AREA, MatchScale
+from .spectral import laplacian
 
 #: What :func:`as_shape` reads: a path, a Shape, a (vertices, faces) tuple, an (N, 3)
 #: array (a point cloud), or an object with ``vertices`` (and ``faces``), such as a
@@ -64,6 +65,27 @@ class Surface:
     normals: np.ndarray
     min_vertices: int = 0
     subdivided: bool = False
+    _spectra: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = dataclasses.field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+
+    def eigenpairs(self, k: int, coarse: int) -> tuple[np.ndarray, np.ndarray]:
+        """The working shape's ``k`` smallest Laplace-Beltrami eigenpairs
+        (:func:`intrinsym.spectral.laplacian.eigenpairs`, ``coarse`` as there), solved once
+        per ``(k, coarse)``: the detects of one prepared surface share them.
+
+        Returns
+        -------
+        evals : (k,) float64, read-only
+        evecs : (N, k) float64, read-only
+        """
+        key = (k, coarse)
+        if key not in self._spectra:
+            pairs = laplacian.eigenpairs(self.shape.vertices, self.shape.faces, k, coarse)
+            for a in pairs:
+                a.setflags(write=False)
+            self._spectra[key] = pairs
+        return self._spectra[key]
 
     def to_input(self, points: np.ndarray) -> np.ndarray:
         """Normalised coordinates -> the input file's coordinates."""

@@ -17,7 +17,6 @@ from scipy.spatial.distance import cdist
 from ..geodesics import geodesics
 from ..mesh import sampling
 from ..params import OFFSET_TARGETS, Params
-from ..spectral import laplacian
 from ..surface import Surface, sample
 from . import descriptors
 
@@ -171,9 +170,9 @@ def spin_descriptors(surface: Surface, vertices: np.ndarray, radius: float, p: P
 
 def spectrum(surface: Surface, k: int, coarse: int) -> Spectrum:
     """Laplace-Beltrami eigenpairs of the working shape: (K,) values, (N, K) vectors,
-    K = ``k`` (at most N - 1); ``coarse`` as :func:`intrinsym.spectral.laplacian.eigenpairs`."""
-    shape = surface.shape
-    return laplacian.eigenpairs(shape.vertices, shape.faces, min(k, len(shape.vertices) - 1), coarse)
+    K = ``k`` (at most N - 1); ``coarse`` as :func:`intrinsym.spectral.laplacian.eigenpairs`.
+    Solved once per surface (:meth:`intrinsym.surface.Surface.eigenpairs`)."""
+    return surface.eigenpairs(min(k, len(surface.shape.vertices) - 1), coarse)
 
 
 def spectra(src: Surface, tgt: Surface, p: Params, self_match: bool) -> tuple[Spectrum, Spectrum] | None:
