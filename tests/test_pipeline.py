@@ -255,10 +255,17 @@ def spot_again():
     return surface, intrinsym.detect(surface, p)
 
 
-def test_deterministic_for_a_seed(spot, spot_result, spot_again):
+@pytest.fixture(scope="module")
+def spot_surface(spot_again):
+    """spot prepared at SMALL's working size, its eigenpairs solved (by spot_again's detect):
+    the module's other detects of spot reuse it (they equal detects of the mesh itself)."""
+    return spot_again[0]
+
+
+def test_deterministic_for_a_seed(spot_surface, spot_result, spot_again):
     _, again = spot_again
     assert np.array_equal(again.marginals, spot_result.marginals)
-    other = intrinsym.detect(spot, intrinsym.make_params(seed=1, **SMALL))
+    other = intrinsym.detect(spot_surface, intrinsym.make_params(seed=1, **SMALL))
     assert not np.array_equal(other.source_point_vertex, spot_result.source_point_vertex)
 
 
@@ -327,9 +334,9 @@ def test_a_prepared_surface_serves_the_counts_of_its_working_size(spot):
         intrinsym.detect(small)
 
 
-def test_residual_schedule_end_to_end(spot, spot_result):
-    res = intrinsym.detect(spot, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
-    colour = intrinsym.detect(spot, intrinsym.make_params(schedule="colour", **dict(SMALL, iterations=100)))
+def test_residual_schedule_end_to_end(spot_surface, spot_result):
+    res = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
+    colour = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="colour", **dict(SMALL, iterations=100)))
     assert (res.info.bp.schedule, colour.info.bp.schedule) == ("residual", "colour")
     # the default: the residual schedule on the CPU, the colour schedule on a GPU
     assert spot_result.info.bp.schedule == bp.resolve_schedule("auto", spot_result.info.bp.backend)
@@ -347,13 +354,13 @@ def test_scale_free(spot, spot_result):
     assert np.allclose(r.source_points, spot_result.source_points * 1000.0 + 5.0)
 
 
-def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
-    kept = intrinsym.detect(spot, intrinsym.make_params(remove_trivial=False, **SMALL))
+def test_trivial_match_removed_weighted_and_kept(spot, spot_surface, spot_result):
+    kept = intrinsym.detect(spot_surface, intrinsym.make_params(remove_trivial=False, **SMALL))
     removed = spot_result  # the default ("auto") removes it: spot's mirror is a near-isometry
     identity = removed.info.identity
     assert identity.weight == 0.0 and identity.isometry >= identity.threshold, identity
     assert identity.reflection >= identity.reflection_threshold, identity  # its own inverse, orientation reversed
-    weighted = intrinsym.detect(spot, intrinsym.make_params(trivial_weight=0.7, **SMALL))
+    weighted = intrinsym.detect(spot_surface, intrinsym.make_params(trivial_weight=0.7, **SMALL))
     assert np.array_equal(kept.target_point_vertex, removed.target_point_vertex)
     floor = np.float32(removed.info.resolved.unary_floor)
     # Euclidean distance is a lower bound of the geodesic one: every target this close
@@ -384,13 +391,15 @@ def test_trivial_match_removed_weighted_and_kept(spot, spot_result):
     assert 2 * mass["removed"] < mass["weighted"] < mass["kept"] / 2, mass
 
 
-def test_an_unsure_global_symmetry_runs_bp_again_wider_and_keeps_the_less_distorted_map(spot, spot_result, tmp_path):
+def test_an_unsure_global_symmetry_runs_bp_again_wider_and_keeps_the_less_distorted_map(
+    spot_surface, spot_result, tmp_path
+):
     # spot's mirror passes the reflection test; an isometry threshold of 1 makes the
     # global symmetry rest on that test alone, as on strongly posed shapes (victoria2)
     unsure = dict(SMALL, isometry_threshold=1.0)
-    first = intrinsym.detect(spot, intrinsym.make_params(unsure_radius=1.0, **unsure))
-    wide = intrinsym.detect(spot, intrinsym.make_params(unsure_radius=1.0, trivial_radius=0.1, **unsure))
-    both = intrinsym.detect(spot, intrinsym.make_params(**unsure))
+    first = intrinsym.detect(spot_surface, intrinsym.make_params(unsure_radius=1.0, **unsure))
+    wide = intrinsym.detect(spot_surface, intrinsym.make_params(unsure_radius=1.0, trivial_radius=0.1, **unsure))
+    both = intrinsym.detect(spot_surface, intrinsym.make_params(**unsure))
     assert spot_result.info.identity.wider_radius is None  # sure: one BP
     assert first.info.identity.wider_radius is None and first.info.identity.reflection >= 0.55
     i = both.info.identity
