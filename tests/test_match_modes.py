@@ -111,6 +111,19 @@ def test_half_of_spot_matches_spot_within_005():
     assert right["each"] <= 0.3
 
 
+@pytest.mark.slow  # two solves at 150 / 1500, the sizes of the half-spot test above
+def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
+    """match(spot, spot with its half below z = 0 cut away): "no match" on the cut-away
+    half (below -0.05 sqrt(area); measured 0.998), an image on the kept one (above 0.05;
+    0.957)."""
+    spot = intrinsym.load(intrinsym.example_path())
+    half, _ = _cut(spot.vertices, spot.faces, 0.0)
+    found = intrinsym.match(spot, half, intrinsym.make_params(n_source=150, n_target=1500)).symmetry_map()
+    z = spot.vertices[:, 2] / np.sqrt(surface_area(spot))
+    assert np.mean(found[z < -0.05] == -1) >= 0.85
+    assert np.mean(found[z > 0.05] >= 0) >= 0.9
+
+
 def test_a_symmetric_pair_reports_both_answers(tmp_path):
     figure = shapes.figure(6)
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
