@@ -83,8 +83,11 @@ class Result:
     global_map : (N_in,) int64 or None
         The global symmetry's dense map the run chose among its candidates (seeded
         ZoomOut's, the extraction's, a spectral one: ``run.json``'s ``global_map``), as the
-        image of every input vertex, -1 where it has no support; None: no global symmetry,
-        or a run without the dense map (:meth:`symmetry_map` is then the extraction's).
+        image of every input vertex, -1 where it has no support; in ``match`` of a whole to
+        its part (``info.target_part``), the part's own match to the whole inverted, -1
+        where the source has no counterpart on the part
+        (:func:`intrinsym.pipeline.invert_part_match`); None: no global symmetry, or a run
+        without the dense map (:meth:`symmetry_map` is then the extraction's).
     pass_marginals : (P - 1, S, T) float32 or None
         Marginals of the BP passes after the first (``Params.passes``); None for one
         pass. Their unaries follow from ``unary`` (:attr:`passes`).
@@ -181,8 +184,9 @@ class Result:
         itself) and everywhere when there is none.
 
         The global map the run chose (``global_map``,
-        :func:`intrinsym.globalmap.globalmap.choose_global_map`) when it made one, else the
-        extraction's (:func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`). Needs ``support``
+        :func:`intrinsym.globalmap.globalmap.choose_global_map`; a whole matched to its
+        part: the part's match inverted, -1 where it has no counterpart) when it made one,
+        else the extraction's (:func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`). Needs ``support``
         and ``extraction``.
         """
         if self.support is None or self.extraction is None:
