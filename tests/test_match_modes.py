@@ -69,19 +69,20 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, t
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
 
 
-def test_a_whole_matched_to_its_part_leaves_the_cut_away_part_unmatched(half_and_whole, tmp_path):
-    """match(whole, part): the whole's vertices cut away on the part (below z = -0.1) get
-    "no match" (-1), the others keep an image (a band of 0.1 either side not scored); the
-    map is that of the part's own match to the whole inverted, and a loaded result keeps it."""
+def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, tmp_path):
+    """match(whole, part)'s vertex map is the part's own match to the whole inverted
+    (:func:`invert_part_match`), -1 off what it covers, and a loaded result keeps it. At
+    this size the part's own map is mostly wrong (0.23 of the half within 0.1 of its true
+    image at seed 0), so what the inverse leaves unmatched is measured at 150 / 1500 on
+    spot, in the slow test below; :func:`inverse_vertex_map` itself is tested on exact maps
+    in test_vertex_maps.py."""
     half, whole, _ = half_and_whole
     p = intrinsym.make_params(n_source=40, n_target=400, passes=1)
     result = intrinsym.match(whole, half, p)
     assert result.info.part and result.info.target_part and "reverse match" in result.info.seconds
     found = result.symmetry_map()
-    z = whole.vertices[:, 2]
-    assert np.mean(found[z < -0.2] == -1) >= 0.85
-    assert np.mean(found[z > 0.0] >= 0) >= 0.9
     assert np.array_equal(found, invert_part_match(intrinsym.match(half, whole, p), half, whole))
+    assert (found == -1).any() and (found >= 0).any() and found.max() < len(half.vertices)
     back = intrinsym.Result.load(result.save(tmp_path / "out"))
     assert back.info.target_part and np.array_equal(back.symmetry_map(), found)
     assert not back.symmetry_confidence()[found < 0].any()
@@ -114,8 +115,9 @@ def test_half_of_spot_matches_spot_within_005():
 @pytest.mark.slow  # two solves at 150 / 1500, the sizes of the half-spot test above
 def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
     """match(spot, spot with its half below z = 0 cut away): "no match" on the cut-away
-    half (below -0.05 sqrt(area); measured 0.998), an image on the kept one (above 0.05;
-    0.957)."""
+    half (below -0.05 sqrt(area); measured at seeds 0 / 1 / 2: 0.998 / 1.000 / 1.000), an
+    image on the kept one (above 0.05; 0.957 / 0.970 / 0.985). At 60 / 600 the half's own
+    map fails and the inverse with it (cut-away unmatched 0.50-0.93, kept matched 0.17-0.33)."""
     spot = intrinsym.load(intrinsym.example_path())
     half, _ = _cut(spot.vertices, spot.faces, 0.0)
     found = intrinsym.match(spot, half, intrinsym.make_params(n_source=150, n_target=1500)).symmetry_map()
