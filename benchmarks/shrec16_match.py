@@ -58,8 +58,6 @@ from intrinsym.result import modes
 from partial import _group, _value, confidence_row, run_script
 from tosca import score_histogram
 
-#: Cache-format revision: a file with another one is recomputed.
-CACHE_FORMAT = 1
 #: The contest's thresholds (units of sqrt(area(null))).
 THRESHOLDS = (0.05, 0.10, 0.25)
 #: A source sample scores "both modes" when its true and mirror points are this far apart ...
