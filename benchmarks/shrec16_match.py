@@ -208,11 +208,10 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         row["true_only"] = float(np.mean(at_true & ~at_mirror)) if far.any() else None
         row["mirror_only"] = float(np.mean(~at_true & at_mirror)) if far.any() else None
         start = time.perf_counter()
-        invert_part_match(result, shape, null)
+        inverse = {COVER_SPACINGS: invert_part_match(result, shape, null)}
         row["reverse_seconds"] = time.perf_counter() - start
-        row["reaches"] = {
-            str(k): reverse_scores(invert_part_match(result, shape, null, k), true, mirror, graph) for k in REACHES
-        }
+        inverse.update({k: invert_part_match(result, shape, null, k) for k in REACHES if k not in inverse})
+        row["reaches"] = {str(k): reverse_scores(inverse[k], true, mirror, graph) for k in REACHES}
     errors = np.minimum(evaluate.map_errors(vmap, true, graph), evaluate.map_errors(vmap, mirror, graph))
     if result is not None:
         mapped = vmap >= 0

@@ -29,7 +29,7 @@ from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
 from .globalmap.vertex_maps import inverse_vertex_map
-from .mesh.shape import surface_area, vertex_areas
+from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
 from .params import NO_PARTNER_WEIGHT, OFFSET_TARGETS, PARTIAL_AREA, WORK_PER_SAMPLE, Params, make_params
 from .problem import Problem, sampled
@@ -591,19 +591,23 @@ def match(
     clock.lap("prepare")
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")
-    header = {"mode": "match", "input": str(sa.path), "target_input": str(sb.path), "preset": preset, "part": part}
-    result = _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, header)
+    result = _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, _match_header(sa, sb, preset, part))
     if not (part and area_b < area_a):
         return result
     # The target is the part: every source sample takes a label, so the source vertices
     # cut away on the target would get one too. The part's own match to the whole (what
     # match(b, a) computes) covers those that have a counterpart; the rest get -1.
-    back_header = {"mode": "match", "input": str(sb.path), "target_input": str(sa.path), "preset": preset, "part": part}
+    back_header = _match_header(sb, sa, preset, part)
     back = _solve(sampled(surf_b, surf_a, *sample_pair(surf_b, surf_a, p), p, False), p, _Clock(None), back_header)
     image = invert_part_match(back, sb, sa)
     clock.lap("reverse match")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True)
     return dataclasses.replace(result, global_map=image, info=info)
+
+
+def _match_header(a: Shape, b: Shape, preset: str, part: bool) -> dict:
+    """:class:`RunInfo`'s mode, inputs and preset of a match of ``a`` to ``b``."""
+    return {"mode": "match", "input": str(a.path), "target_input": str(b.path), "preset": preset, "part": part}
 
 
 #: The counterpart of a part on its whole lies within this many of the part's sample
