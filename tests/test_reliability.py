@@ -112,10 +112,20 @@ def test_view_to_a_missing_folder_is_a_one_line_error(tmp_path, capsys, result_d
     one_line_error(capsys, cli.main(["view", str(result_dir), "-o", str(tmp_path / "missing" / "v.html")]), "v.html")
 
 
-def test_sigterm_is_handled_like_ctrl_c(tmp_path):
+@pytest.mark.parametrize(
+    ("signum", "threads", "code", "said"),
+    [
+        (signal.SIGTERM, "2", 143, "terminated"),
+        (signal.SIGTERM, "1", 143, "terminated"),
+        (signal.SIGINT, "1", 130, "interrupted"),
+    ],
+)
+def test_sigterm_and_ctrl_c_end_the_run_cleanly(tmp_path, signum, threads, code, said):
     # 100 / 1000: seconds of work after the lock, so the signal lands mid-run; no
     # subdivision of spot (2,930 vertices), and shorter kernels than at 200 / 3000, whose
-    # running kernel the exit waits for: 27 s once on a loaded machine (usually 0.3-0.5 s)
+    # running kernel the exit waits for: 27 s once on a loaded machine (usually 0.3-0.5 s).
+    # One thread runs the kernels on the main thread, where the signal lands in Numba's
+    # dispatcher; two run them on a pool, and the main thread waits on a lock
     out = tmp_path / "out"
     proc = subprocess.Popen(
         [
@@ -133,36 +143,48 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path):
         ],
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, "NUMBA_NUM_THREADS": threads},
+        # a user's Ctrl-C reaches a process with the default SIGINT handler (a child of this
+        # one may have inherited "ignore")
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     lock = tmp_path / ".out.lock"
     deadline = time.monotonic() + 120
     while not lock.exists() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     time.sleep(0.5)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err
-    assert err.strip().splitlines()[-1] == "intrinsym: terminated"
+    assert proc.returncode == code, err
+    assert err.strip().splitlines()[-1] == f"intrinsym: {said}"
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no result, no temporary, no lock
 
 
-def test_sigterm_inside_llvmlite_is_sent_again_not_raised(monkeypatch):
+@pytest.mark.parametrize("module", ["llvmlite.binding.executionengine", "numba.core.serialize"])
+def test_a_signal_inside_numba_is_sent_again_not_raised(monkeypatch, module):
     """An exception cannot leave llvmlite's ctypes callbacks (a SIGTERM while Numba compiles
-    on a first run crashed the process with a segmentation fault): there the handler sends
-    the signal again a moment later; anywhere else it raises Terminated."""
+    on a first run crashed the process with a segmentation fault), and Numba's dispatcher
+    turns one raised in the Python code it calls (unpickling a cached kernel, with one
+    thread: the kernels run on the main thread) into a SystemError traceback: there the
+    handler sends the signal again a moment later; anywhere else it raises Terminated."""
     sent = []
     monkeypatch.setattr(cli.os, "kill", lambda pid, signum: sent.append((pid, signum)))
-    caller = types.SimpleNamespace(f_globals={"__name__": "numba.core.codegen"}, f_back=None)
-    callback = types.SimpleNamespace(f_globals={"__name__": "llvmlite.binding.executionengine"}, f_back=caller)
-    cli._terminate(signal.SIGTERM, callback)
+    ours = types.SimpleNamespace(f_globals={"__name__": "intrinsym._threads"}, f_back=None)
+    inside = types.SimpleNamespace(f_globals={"__name__": module}, f_back=ours)
+    cli._interrupt(signal.SIGTERM, inside)
     deadline = time.monotonic() + 10
     while not sent and time.monotonic() < deadline:
         time.sleep(0.01)
     assert sent == [(os.getpid(), signal.SIGTERM)]
     with pytest.raises(cli.Terminated):
-        cli._terminate(signal.SIGTERM, types.SimpleNamespace(f_globals={"__name__": "numba.core"}, f_back=None))
+        cli._interrupt(signal.SIGTERM, ours)
     with pytest.raises(cli.Terminated):
-        cli._terminate(signal.SIGTERM, None)
+        cli._interrupt(signal.SIGTERM, types.SimpleNamespace(f_globals={"__name__": "numbat"}, f_back=None))
+    with pytest.raises(cli.Terminated):
+        cli._interrupt(signal.SIGTERM, None)
+    with pytest.raises(KeyboardInterrupt) as raised:
+        cli._interrupt(signal.SIGINT, ours)
+    assert raised.type is KeyboardInterrupt
 
 
 def test_generate_refuses_sizes_that_do_not_fit(tmp_path, capsys):

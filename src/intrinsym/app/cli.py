@@ -552,30 +552,41 @@ class Terminated(KeyboardInterrupt):
     files removed, the progress display stopped)."""
 
 
-#: Seconds after which a SIGTERM that arrived inside llvmlite is sent again.
+#: Seconds after which a signal that arrived inside Numba or llvmlite is sent again.
 RESEND_SECONDS = 0.1
+#: Modules whose Python code runs under C callers that drop or mangle an exception raised in
+#: it: llvmlite's ctypes callbacks (Numba compiling its kernels, on a first run) and Numba's
+#: own, which its C dispatcher calls (unpickling a cached kernel, typing the arguments).
+UNINTERRUPTIBLE = ("llvmlite", "numba")
+#: What each handled signal raises where it lands.
+RAISES: dict[int, type[KeyboardInterrupt]] = {signal.SIGTERM: Terminated, signal.SIGINT: KeyboardInterrupt}
 
 
-def _terminate(signum: int, frame: FrameType | None) -> None:
-    """Raise :class:`Terminated` in the frame the signal interrupted, unless that frame runs
-    inside llvmlite (Numba compiling its kernels, on a first run): an exception cannot leave
-    llvmlite's ctypes callbacks, it is dropped there and the process later dies of a
-    segmentation fault. There the signal is sent again a moment later, until it lands outside."""
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    """Raise the signal's exception (:data:`RAISES`) in the frame the signal interrupted,
+    unless that frame runs inside Numba or llvmlite (:data:`UNINTERRUPTIBLE`). An exception
+    cannot leave llvmlite's ctypes callbacks: it is dropped there and the process later dies
+    of a segmentation fault. Numba's C dispatcher turns one raised in the Python code it
+    calls into a ``SystemError`` traceback. There the signal is sent again a moment later,
+    until it lands outside: a running kernel has no Python frame, so it lands when the
+    kernel returns."""
     while frame is not None:
-        if str(frame.f_globals.get("__name__", "")).startswith("llvmlite"):
+        if str(frame.f_globals.get("__name__", "")).split(".")[0] in UNINTERRUPTIBLE:
             resend = threading.Timer(RESEND_SECONDS, os.kill, (os.getpid(), signum))
             resend.daemon = True  # a run that ends first is not signalled after it
             resend.start()
             return
         frame = frame.f_back
-    raise Terminated
+    raise RAISES[signum]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``intrinsym`` command; returns the exit code (2 for a user
     error, 130 on Ctrl-C, 143 on SIGTERM)."""
     args = cli_extra.parse(build_parser, argv)
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    previous = {signal.SIGTERM: signal.signal(signal.SIGTERM, _interrupt)}
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not where Ctrl-C is ignored
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, _interrupt)
     try:
         return _run(args)
     except IntrinsymError as err:
@@ -591,7 +602,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("intrinsym: interrupted", file=sys.stderr)
         return 130
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 if __name__ == "__main__":
