@@ -140,6 +140,7 @@ def test_a_core_install_detects_and_names_each_missing_extra_in_one_line(tmp_pat
     import numpy as np
 
     import intrinsym
+    from intrinsym.app import cli
 
     # one process for all the commands (each started its own: 1-2 s of imports apiece),
     # each command's exit code, standard output and error kept apart
@@ -160,27 +161,29 @@ def test_a_core_install_detects_and_names_each_missing_extra_in_one_line(tmp_pat
         "print(json.dumps(ran))\n"
     )
     missing = [
-        (("batch", "spot.off", "-o", "many"), "intrinsym batch", "batch"),
-        (("render", "spot"), "intrinsym render", "viz"),
+        (("batch", "star.off", "-o", "many"), "intrinsym batch", "batch"),
+        (("render", "star"), "intrinsym render", "viz"),
         (("detect", "--example", "-o", "again", "--figures"), "intrinsym detect --figures", "viz"),
     ]
-    # evaluate is core: its scores without the curve, which needs [viz]
-    np.save(tmp_path / "truth.npy", np.arange(len(intrinsym.load(intrinsym.example_path()).vertices)))
+    # evaluate is core: its scores without the curve, which needs [viz]. The coarsest star
+    # (182 vertices): detect and evaluate on spot took 6 of this test's 8 s
+    assert cli.main(["generate", "star", "--resolution", "2", "-o", str(tmp_path / "star.off")]) == 0
+    np.save(tmp_path / "truth.npy", np.arange(len(intrinsym.load(tmp_path / "star.off").vertices)))
     commands = [
-        ("detect", "--example", *CLI_SMALL, "-o", "spot", "--quiet"),
+        ("detect", "star.off", *CLI_SMALL, "-o", "star", "--quiet"),
         *(argv for argv, _, _ in missing),
-        ("evaluate", "spot", "--symmetry-map", "truth.npy"),
+        ("evaluate", "star", "--symmetry-map", "truth.npy"),
     ]
     p = subprocess.run([sys.executable, "-c", code, json.dumps(commands)], capture_output=True, text=True, cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     detected, *refused, evaluated = json.loads(p.stdout)
     assert detected[0] == 0, detected[2]
-    assert (tmp_path / "spot" / "symmetry_map.npy").is_file()
-    assert len(np.load(tmp_path / "spot" / "symmetry_map.npy")) == len(np.load(tmp_path / "truth.npy"))
+    assert (tmp_path / "star" / "symmetry_map.npy").is_file()
+    assert len(np.load(tmp_path / "star" / "symmetry_map.npy")) == len(np.load(tmp_path / "truth.npy"))
     for (argv, what, extra), (returncode, stdout, stderr) in zip(missing, refused, strict=True):
         assert (returncode, stdout) == (2, ""), argv
         assert stderr == f"intrinsym: error: {what} needs the [{extra}] extra: pip install 'intrinsym[{extra}]'\n"
     assert not (tmp_path / "again").exists()
     assert evaluated[0] == 0, evaluated[2]
-    assert (tmp_path / "spot" / "scores.json").is_file() and not (tmp_path / "spot" / "curve.png").exists()
+    assert (tmp_path / "star" / "scores.json").is_file() and not (tmp_path / "star" / "curve.png").exists()
     assert "no curve.png: it needs the [viz] extra" in evaluated[2]
