@@ -51,7 +51,7 @@ BUDGET_S = 90.0
 #: it once (plain ``load`` scheduling computed it on each worker that drew one of their
 #: tests). ``example_detected`` and ``browser`` are session fixtures of two modules each; the
 #: others hold module fixtures (``spot_result`` and ``spot_again``, ``star`` and ``figure``,
-#: ``mirror_results``, ``star``).
+#: ``mirror_results``, ``star``, ``half_matched``).
 SHARED_FIXTURE_GROUPS = {
     "test_cli.py": "example_detected",
     "test_reliability.py": "example_detected",
@@ -61,6 +61,7 @@ SHARED_FIXTURE_GROUPS = {
     "test_generated.py": "test_generated.py",
     "test_unary.py": "test_unary.py",
     "test_symmetry_group.py": "test_symmetry_group.py",
+    "test_match_modes.py": "test_match_modes.py",
 }
 
 
@@ -87,6 +88,27 @@ _STARTED = pytest.StashKey[float]()
 
 def pytest_sessionstart(session: pytest.Session) -> None:
     session.config.stash[_STARTED] = time.perf_counter()
+    share_the_cores()
+
+
+def share_the_cores() -> None:
+    """In a pytest-xdist worker, give this process's Numba kernels its share of the cores.
+
+    The workers already run tests on every core: a kernel that also starts a thread per
+    core oversubscribes them, and the small problems of the tests pay more for the thread
+    starts than they gain (the default run: 255 s of test durations over two workers, 206
+    s over one). Processes the tests start inherit the share through
+    ``NUMBA_NUM_THREADS``; this process keeps Numba's own count, so that
+    ``tests/test_threads.py`` can still raise it to test the threaded paths.
+    """
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if workers < 2:
+        return
+    import numba
+
+    share = max(1, (os.cpu_count() or 1) // workers)
+    numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(share))
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: pytest.Config) -> None:

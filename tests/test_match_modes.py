@@ -36,6 +36,17 @@ def half_and_whole() -> tuple[intrinsym.Shape, intrinsym.Shape, np.ndarray]:
     return half, from_arrays(whole.vertices, whole.faces), used
 
 
+#: The sizes of the part-to-whole matches of the module's small tests.
+SMALL = {"n_source": 40, "n_target": 400, "passes": 1}
+
+
+@pytest.fixture(scope="module")
+def half_matched(half_and_whole) -> intrinsym.Result:
+    """The half matched to its whole at :data:`SMALL`, shared by the tests that read it."""
+    half, whole, _ = half_and_whole
+    return intrinsym.match(half, whole, intrinsym.make_params(**SMALL))
+
+
 def test_larger_scale_keeps_the_parts_size(half_and_whole):
     half, whole, _ = half_and_whole
     ratio = surface_area(half) / surface_area(whole)
@@ -53,12 +64,11 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
-def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, tmp_path):
+def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_matched, tmp_path):
     """A part matched to its whole is told apart in run.json; its confidence is the
     score through PART_CALIBRATION (fitted on SHREC'16 parts), not the complete shapes'
     tables, and a loaded result says the same."""
-    half, whole, _ = half_and_whole
-    result = intrinsym.match(half, whole, intrinsym.make_params(n_source=30, n_target=300, passes=1))
+    result = half_matched
     assert result.info.part and result.calibration_table() is confidence.PART_CALIBRATION
     mapped = result.symmetry_map() >= 0
     own = confidence.calibrated(result.symmetry_score(), table=confidence.PART_CALIBRATION)
@@ -69,7 +79,7 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, t
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
 
 
-def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, tmp_path):
+def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, half_matched, tmp_path):
     """match(whole, part)'s vertex map is the part's own match to the whole inverted
     (:func:`invert_part_match`), -1 off what it covers, and a loaded result keeps it. At
     this size the part's own map is mostly wrong (0.23 of the half within 0.1 of its true
@@ -77,11 +87,10 @@ def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and
     spot, in the slow test below; :func:`inverse_vertex_map` itself is tested on exact maps
     in test_vertex_maps.py."""
     half, whole, _ = half_and_whole
-    p = intrinsym.make_params(n_source=40, n_target=400, passes=1)
-    result = intrinsym.match(whole, half, p)
+    result = intrinsym.match(whole, half, intrinsym.make_params(**SMALL))
     assert result.info.part and result.info.target_part and "reverse match" in result.info.seconds
     found = result.symmetry_map()
-    assert np.array_equal(found, invert_part_match(intrinsym.match(half, whole, p), half, whole))
+    assert np.array_equal(found, invert_part_match(half_matched, half, whole))
     assert (found == -1).any() and (found >= 0).any() and found.max() < len(half.vertices)
     back = intrinsym.Result.load(result.save(tmp_path / "out"))
     assert back.info.target_part and np.array_equal(back.symmetry_map(), found)
