@@ -97,9 +97,10 @@ def share_the_cores() -> None:
     The workers already run tests on every core: a kernel that also starts a thread per
     core oversubscribes them, and the small problems of the tests pay more for the thread
     starts than they gain (the default run: 255 s of test durations over two workers, 206
-    s over one). Processes the tests start inherit the share through
-    ``NUMBA_NUM_THREADS``; this process keeps Numba's own count, so that
-    ``tests/test_threads.py`` can still raise it to test the threaded paths.
+    s over one). Only this process's count is lowered: ``NUMBA_NUM_THREADS`` stays as it
+    is (Numba reads it again when it compiles, on a fresh install, and refuses a value
+    other than that of the threads it launched), so ``tests/test_threads.py`` can still
+    raise the count to test the threaded paths, and processes the tests start keep theirs.
     """
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers < 2:
@@ -108,7 +109,6 @@ def share_the_cores() -> None:
 
     share = max(1, (os.cpu_count() or 1) // workers)
     numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))
-    os.environ.setdefault("NUMBA_NUM_THREADS", str(share))
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: pytest.Config) -> None:
