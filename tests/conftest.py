@@ -95,12 +95,12 @@ def share_the_cores() -> None:
     """In a pytest-xdist worker, give this process's Numba kernels its share of the cores.
 
     The workers already run tests on every core: a kernel that also starts a thread per
-    core oversubscribes them, and the small problems of the tests pay more for the thread
-    starts than they gain (the default run: 255 s of test durations over two workers, 206
-    s over one). Only this process's count is lowered: ``NUMBA_NUM_THREADS`` stays as it
-    is (Numba reads it again when it compiles, on a fresh install, and refuses a value
-    other than that of the threads it launched), so ``tests/test_threads.py`` can still
-    raise the count to test the threaded paths, and processes the tests start keep theirs.
+    core oversubscribes them (the default run beside a one-core job, side by side: 259 s of
+    CPU against 291 s with every kernel on two threads). Only this process's count is
+    lowered: ``NUMBA_NUM_THREADS`` stays as it is (Numba reads it again when it compiles,
+    on a fresh install, and refuses a value other than that of the threads it launched),
+    so ``tests/test_threads.py`` can still raise the count to test the threaded paths, and
+    processes the tests start keep theirs.
     """
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if workers < 2:
