@@ -83,6 +83,10 @@ def test_parameter_sweep_reuses_one_surface(tmp_path: Path, monkeypatch, capsys)
     assert all(0.5 < float(row[4]) <= 1.0 for row in rows), "spot's global symmetry maps most vertices"
 
 
+# A Dask cluster of worker processes, each importing the package: about 9 s of the default
+# run for no code the default run leaves untested (tests/test_batch.py runs intrinsym.batch
+# on a local cluster). CI runs it with -m slow.
+@pytest.mark.slow
 def test_batch_folder_prints_the_summary(tmp_path: Path) -> None:
     out = run_example("batch_folder.py", "--small", "-o", "batch", cwd=tmp_path)
     import pandas as pd

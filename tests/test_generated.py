@@ -61,6 +61,7 @@ def test_star_marginals_reach_every_arm(star):
     assert best[~np.eye(5, dtype=bool)].min() >= 0.1, np.round(best, 2)
 
 
+@pytest.mark.slow  # five BP passes at 60 / 600 (CI: -m slow); passes at small sizes: test_pipeline
 def test_star_marginals_of_five_passes_reach_every_arm():
     # measured at this size: the weakest other arm over the passes' marginals 0.42 with
     # 4 passes, 1.0 with 5 (one pass: 0.00, 5 of the 20 arm pairs above 0.1)
@@ -152,14 +153,8 @@ def test_figure_global_map_stays_precise_when_the_cell_map_keeps_a_hair_more_mas
     assert abs(float(mass[result.source_point_vertex].mean()) - chosen.mass) < 0.05
 
 
-@pytest.mark.parametrize(
-    "name",
-    [
-        "mirror",
-        # the same claim at the same size on a second shape; the mirror's case runs by default
-        pytest.param("figure", marks=pytest.mark.slow),  # a detect at 120 / 1500 (CI: -m slow)
-    ],
-)
+@pytest.mark.slow  # a detect at 120 / 1500, the size it was measured at (CI: -m slow)
+@pytest.mark.parametrize("name", ["mirror", "figure"])
 def test_confidence_is_calibrated_on_an_exact_symmetry(name, request):
     """The calibration tables (fitted on the TOSCA poses) on generated shapes whose
     symmetry is known exactly: the bent ellipsoid's mirror, and the posed figure's (the

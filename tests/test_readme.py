@@ -201,8 +201,8 @@ def test_every_documented_command_parses(doc: str, command: str, tmp_path: Path)
 
 def test_readme_commands_run(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """The README's command-line block runs as written (placeholders bound to a generated
-    star); match and batch, which need a second shape or a Dask cluster, are run by
-    tests/test_cli.py and tests/test_batch.py."""
+    star); match, batch and bench, which need a second shape, a Dask cluster or a process
+    per case, are run by tests/test_cli.py, tests/test_batch.py and tests/test_bench.py."""
     from intrinsym.app import cli
 
     # the coarsest star (182 vertices, 360 triangles): the figures draw every triangle
@@ -210,10 +210,10 @@ def test_readme_commands_run(tmp_path: Path, capsys: pytest.CaptureFixture) -> N
     ran = []
     for command in shell_commands(README):
         argv = as_argv(command, tmp_path)
-        if argv[0] in ("match", "batch") or (argv[0] == "detect" and "--example" in argv):
+        if argv[0] in ("match", "batch", "bench") or (argv[0] == "detect" and "--example" in argv):
             continue
         assert cli.main(argv) == 0, f"README.md: `{command}` failed: {capsys.readouterr().err}"
         ran.append(argv[0])
-    assert ran == ["detect", "query", "render", "export", "evaluate", "bench"]
+    assert ran == ["detect", "query", "render", "export", "evaluate"]
     assert (tmp_path / "out" / "figures" / "global_symmetry.png").is_file() and (tmp_path / "star.ply").is_file()
     assert json.loads((tmp_path / "out" / "scores.json").read_text())["group"]["maps"] == 19
