@@ -196,6 +196,10 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         result = intrinsym.match(shape, null, intrinsym.make_params(**overrides))
         row["seconds"] = time.perf_counter() - start
         vmap = result.symmetry_map()
+        if result.info.part_map is not None:
+            row["part_map"] = result.info.part_map.source
+            row["part_map_distortion"] = result.info.part_map.distortion
+            row["part_map_seconds"] = result.info.seconds.get("part map")
         two = modes.two_modes(result)
         row["confidence0"], row["confidence1"] = (float(c) for c in two.confidence)
         row["mode0_true_010"] = float(np.mean(evaluate.map_errors(two.maps[0], true, graph) <= 0.10))

@@ -64,7 +64,7 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
-def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_matched, tmp_path):
+def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, half_matched, tmp_path):
     """A part matched to its whole is told apart in run.json; its confidence is the
     score through PART_CALIBRATION (fitted on SHREC'16 parts), not the complete shapes'
     tables, and a loaded result says the same."""
@@ -77,6 +77,17 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_matched, tmp
     assert conf.max() <= max(confidence.PART_CALIBRATION)
     back = intrinsym.Result.load(result.save(tmp_path / "out"))
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
+    # the source is the part: its map is the extraction's or the partial functional map's,
+    # whichever changes fewer of its distances, and run.json says which
+    stats = result.info.part_map
+    assert stats is not None and "part map" in result.info.seconds
+    kept = stats.distortion[stats.source]
+    assert kept is not None and all(d is None or kept <= d for d in stats.distortion.values())
+    assert (result.global_map is not None) == (stats.source == "partial_fmap")
+    assert back.info.part_map == stats and np.array_equal(back.symmetry_map(), result.symmetry_map())
+    half, whole, _ = half_and_whole
+    off = intrinsym.match(half, whole, intrinsym.make_params(**SMALL, part_fmap=False))
+    assert off.info.part_map is None and "part map" not in off.info.seconds
 
 
 def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, half_matched, tmp_path):

@@ -348,6 +348,16 @@ class Params:
         "global map",
         self_match=True,
     )
+    part_fmap: bool = _p(
+        True,
+        "a part matched to its whole (the smaller shape the source) also gets a partial "
+        "functional map (Rodola et al. 2017), and the vertex map of the two that changes "
+        "fewer of the part's geodesic distances is kept (run.json: part_map)",
+        "global map",
+        paper="off",
+        off_flag="--no-part-fmap",
+        match_only=True,
+    )
 
     def __post_init__(self) -> None:
         for name, value in _choices().items():
@@ -460,6 +470,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         zoomout=False,
         refine_anchors=0,
         smooth_map=False,
+        part_fmap=False,
         passes=1,
         trivial_weight=0.0,
     ),

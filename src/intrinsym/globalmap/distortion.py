@@ -25,6 +25,7 @@ __all__ = [
     "THRESHOLDS",
     "DistortionScores",
     "local_distortion",
+    "graph_map_distortion",
     "local_distortion_on_graph",
     "map_distortion",
 ]
@@ -122,19 +123,49 @@ def map_distortion(
     """
     cleaned, vmap, graph = unit if unit is not None else geodesics.unit_area_graph(shape)
     image = _cleaned_image(vertex_map, shape, vmap, len(cleaned.vertices))
+    return graph_map_distortion(image, graph, graph, radius, n_sources, seed, thresholds)
+
+
+def graph_map_distortion(
+    image: np.ndarray,
+    graph: sp.spmatrix,
+    target_graph: sp.spmatrix,
+    radius: float = DISTORTION_RADIUS,
+    n_sources: int = 200,
+    seed: int = 0,
+    thresholds: np.ndarray = THRESHOLDS,
+) -> DistortionScores:
+    """:func:`map_distortion` of a map between the vertices of two geodesic graphs (one
+    graph twice for a self-map), distances in the graphs' own unit.
+
+    Parameters
+    ----------
+    image : (N,) int
+        Vertex of ``target_graph`` of every vertex of ``graph``, -1 for none (left out).
+    graph : (N, N) scipy.sparse matrix
+        Geodesic graph of the map's domain.
+    target_graph : (M, M) scipy.sparse matrix
+        Of its codomain, in the same unit.
+    radius, n_sources, seed, thresholds
+        As for :func:`map_distortion`.
+
+    Returns
+    -------
+    DistortionScores
+    """
+    image = np.asarray(image, dtype=np.int64)
     mapped = np.flatnonzero(image >= 0)
     thresholds = np.asarray(thresholds, dtype=np.float64)
     if len(mapped) == 0:
         return DistortionScores(thresholds, np.full(len(thresholds), np.nan), float("nan"), radius, 0)
     x = np.random.default_rng(seed).choice(mapped, size=min(n_sources, len(mapped)), replace=False)
     top = float(thresholds.max())
-    arrays = csr_arrays(graph)
-    rows, ys, d = ball_pairs(arrays, x, radius)
+    rows, ys, d = ball_pairs(csr_arrays(graph), x, radius)
     keep = (image[ys] >= 0) & (ys != x[rows])
     rows, ys, d = rows[keep], ys[keep], d[keep]
     # d(T x, T y) up to radius + top: a pair beyond changes by at least top
-    image_rows, image_cols, image_d = ball_pairs(arrays, image[x], radius + top)
-    d_image = np.full((len(x), len(image)), radius + top)
+    image_rows, image_cols, image_d = ball_pairs(csr_arrays(target_graph), image[x], radius + top)
+    d_image = np.full((len(x), target_graph.shape[0]), radius + top)
     d_image[image_rows, image_cols] = image_d
     change = np.minimum(np.abs(d_image[rows, image[ys]] - d), top)
     fraction = 1.0 - np.searchsorted(np.sort(change), thresholds, side="right") / max(len(change), 1)

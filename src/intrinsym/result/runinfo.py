@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from ..globalmap.part_map import PartMapStats
+
 #: Version of the result folder's format (``run.json``'s ``format_version``).
 FORMAT_VERSION = 5
 
@@ -253,6 +255,9 @@ class RunInfo:
         Match: the target is that part (the source the whole); the result's
         ``global_map`` is the inverse of the part's own match to the whole, -1 ("no
         match") where the source has no counterpart on the part.
+    part_map : PartMapStats or None
+        Match of a part to its whole (the source the part) with ``part_fmap``: which
+        vertex map was kept.
     """
 
     mode: str
@@ -270,6 +275,7 @@ class RunInfo:
     content_key: str | None = None
     part: bool = False
     target_part: bool = False
+    part_map: PartMapStats | None = None
 
     @property
     def no_partner(self) -> bool:
@@ -300,6 +306,7 @@ class RunInfo:
             identity = {k: v for k, v in identity.items() if k not in _ROUND_TRIP_KEYS}
         zoomout = run.get("zoomout")
         global_map = run.get("global_map")
+        part_map = run.get("part_map")
         return cls(
             mode=run["mode"],
             input=run["input"],
@@ -316,6 +323,7 @@ class RunInfo:
             content_key=run.get("content_key"),
             part=bool(run.get("part", False)),
             target_part=bool(run.get("target_part", False)),
+            part_map=PartMapStats(**part_map) if part_map else None,
         )
 
 

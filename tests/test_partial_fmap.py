@@ -1,0 +1,147 @@
+"""Partial functional maps (globalmap/partial_fmap.py): the gradient against linear
+functions, the commutativity term and the C-step against their dense Kronecker forms, the
+wave-kernel density against its definition, and a part of the posed figure mapped into
+the figure."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+import trimesh
+
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap import part_map, partial_fmap
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import from_arrays, surface_area
+from intrinsym.surface import prepare_pair
+from intrinsym.unary import descriptors
+
+
+def test_the_gradient_of_a_linear_function_is_its_tangent_part() -> None:
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    v = sphere.vertices * [1.5, 1.0, 0.6]
+    grad, areas = partial_fmap.gradient_operator(v, sphere.faces)
+    a = np.array([0.3, -1.2, 0.7])
+    per_face = (grad @ (v @ a)).reshape(3, -1).T
+    normal = np.cross(v[sphere.faces[:, 1]] - v[sphere.faces[:, 0]], v[sphere.faces[:, 2]] - v[sphere.faces[:, 0]])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    assert np.allclose(per_face, a - (normal @ a)[:, None] * normal, atol=1e-12)
+    assert areas.sum() == pytest.approx(trimesh.Trimesh(v, sphere.faces).area)
+    assert np.allclose(grad @ np.ones(len(v)), 0.0, atol=1e-12)  # constants have no gradient
+
+
+def _symmetric(rng: np.random.Generator, n: int, k: int) -> np.ndarray:
+    m = rng.normal(size=(n, k, k))
+    return m + m.transpose(0, 2, 1)
+
+
+def _dense_commutativity(f: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """The term's quadratic form on the row-major vec(C): mean_f of
+    kron(I, F^2) + kron(G^2, I) - 2 kron(G, F)."""
+    k_w, k_p = g.shape[1], f.shape[1]
+    return sum(
+        np.kron(np.eye(k_w), ff @ ff) + np.kron(gg @ gg, np.eye(k_p)) - 2 * np.kron(gg, ff) for ff, gg in zip(f, g)
+    ) / len(f)
+
+
+def test_the_commutativity_gradient_is_its_dense_quadratic_form() -> None:
+    rng = np.random.default_rng(0)
+    f, g = _symmetric(rng, 4, 5), _symmetric(rng, 4, 7)
+    c = rng.normal(size=(7, 5))
+    q = _dense_commutativity(f, g)
+    assert np.allclose(partial_fmap.commutativity_gradient(c, f, g).ravel(), q @ c.ravel())
+    energy = np.mean([np.linalg.norm(c @ ff - gg @ c) ** 2 for ff, gg in zip(f, g)])
+    assert c.ravel() @ q @ c.ravel() == pytest.approx(energy)
+
+
+def test_the_normal_equations_are_solved_as_the_dense_system_solves_them() -> None:
+    rng = np.random.default_rng(1)
+    k_w, k_p = 8, 5
+    f, g = _symmetric(rng, 3, k_p) / 10, _symmetric(rng, 3, k_w) / 10
+    a = rng.normal(size=(k_p, 20))
+    gram = a @ a.T / 40
+    w_sq = rng.random((k_w, k_p))
+    rhs = rng.normal(size=(k_w, k_p))
+    h = (
+        np.kron(np.eye(k_w), gram)
+        + partial_fmap.MU_W * np.diag(w_sq.ravel())
+        + partial_fmap.MU_DC * _dense_commutativity(f, g)
+    )
+    dense = scipy.linalg.solve(h, rhs.ravel(), assume_a="pos")
+    identity = np.broadcast_to(np.eye(k_p), (k_w, k_p, k_p))
+    for start in (None, rng.normal(size=(k_w, k_p))):
+        found = partial_fmap._solve_normal_equations(gram, w_sq, (f, g), rhs, identity, start)
+        assert np.allclose(found, dense, rtol=1e-7, atol=1e-9 * np.abs(dense).max())
+
+
+def test_the_wave_kernel_density_is_the_signature_before_its_normalisation() -> None:
+    rng = np.random.default_rng(2)
+    evals = np.concatenate([[0.0], np.sort(rng.uniform(1.0, 50.0, 11))])
+    evecs = rng.normal(size=(6, 12))
+    energies, sigma = descriptors.wks_energies(evals, 8)
+    density = descriptors.wave_kernel_density(evals, evecs, energies, sigma)
+    weights = np.exp(-((energies[:, None] - np.log(evals[None, 1:])) ** 2) / (2 * sigma**2))  # (E, K - 1)
+    by_point = np.array([[np.sum(evecs[x, 1:] ** 2 * w) for w in weights] for x in range(6)])
+    assert np.allclose(density, by_point)
+    signature = descriptors.wave_kernel_signature(evals, evecs, energies, sigma)
+    assert np.allclose(np.log(density / weights.sum(axis=1)), signature)
+
+
+@pytest.fixture(scope="module")
+def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
+    """The posed figure (434 vertices) and the vertices of it above y = -1 (one limb's
+    end cut away, 361 vertices)."""
+    figure = shapes.figure(6)
+    keep = figure.vertices[:, 1] > -1.0
+    return figure, np.flatnonzero(keep)
+
+
+def _part(figure: shapes.GeneratedShape, used: np.ndarray):
+    keep = np.zeros(len(figure.vertices), dtype=bool)
+    keep[used] = True
+    faces = figure.faces[keep[figure.faces].all(axis=1)]
+    index = np.full(len(figure.vertices), -1)
+    index[used] = np.arange(len(used))
+    return from_arrays(figure.vertices[used], index[faces])
+
+
+def _right(figure: shapes.GeneratedShape, used: np.ndarray, images: np.ndarray) -> float:
+    """Share of the part's vertices whose image lies within 0.10 sqrt(area) of their own
+    vertex of the figure or of its image under one of the figure's symmetries."""
+    unit = np.sqrt(surface_area(from_arrays(figure.vertices, figure.faces)))
+    graph = geodesics.surface_graph(figure.vertices / unit, figure.faces)
+    truths = [used, *(np.asarray(s)[used] for s in figure.symmetries)]
+    errors = np.min([evaluate.map_errors(images, t, graph) for t in truths], axis=0)
+    return float(np.mean(errors <= 0.10))
+
+
+def test_a_part_of_the_figure_maps_onto_its_place(figure_and_part) -> None:
+    # measured at this size: 0.92 within 0.10, the indicator covering 0.98 of the part's area
+    figure, used = figure_and_part
+    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    images = part_map.part_fmap_map(a, b)
+    to_input = b.nearest_input_vertex(b.shape.vertices)[images[a.vertex_map]]
+    assert _right(figure, used, to_input) >= 0.85
+
+
+def test_the_less_distorted_map_is_kept(figure_and_part, monkeypatch) -> None:
+    """choose_part_map keeps the extraction's map when it is the true one and the
+    partial functional map's is random, and the other way round."""
+    figure, used = figure_and_part
+    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    rng = np.random.default_rng(0)
+    true_working = b.vertex_map[used[a.nearest_input_vertex(a.shape.vertices)]]
+    random_working = rng.integers(0, len(b.shape.vertices), len(a.shape.vertices))
+    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole: random_working)
+    image, stats = part_map.choose_part_map(used.copy(), a, b)
+    assert image is None and stats.source == "extraction"
+    assert stats.distortion["extraction"] < 0.05 < stats.distortion["partial_fmap"]
+    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole: true_working)
+    image, stats = part_map.choose_part_map(rng.integers(0, len(used), len(used)), a, b)
+    assert stats.source == "partial_fmap" and image is not None
+    assert np.array_equal(image, used)
+    # an extraction that gives no image at all is replaced
+    image, stats = part_map.choose_part_map(np.full(len(used), -1), a, b)
+    assert stats.source == "partial_fmap" and stats.distortion["extraction"] is None
