@@ -573,8 +573,8 @@ def match(
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
-    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 5-10 s on
-    the SHREC'16 shapes).
+    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 14-20 s
+    on the SHREC'16 shapes on a 2-core machine).
 
     When the target B is the part (A the whole), every source sample still takes a label,
     so A's vertices cut away on B would get an image too. The result's vertex map
