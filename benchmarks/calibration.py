@@ -13,7 +13,9 @@ partner (a vertex without one never is), the rows of
 :data:`intrinsym.globalmap.confidence.PARTIAL_CALIBRATION`; ``--feature match_score``
 reads ``benchmarks/shrec16_match.py``'s (``DIR/match``): the score of each SHREC'16
 partial shape's map onto its null shape, "within 0.05" of the nearer of the true and
-the mirror point, the rows of :data:`intrinsym.globalmap.confidence.PART_CALIBRATION`. From the
+the mirror point; ``--feature part_kept`` the same pairs by the share of the part's short
+distances its map keeps (``run.json``'s ``part_map``), the rows of
+:data:`intrinsym.globalmap.confidence.PART_CALIBRATION`. From the
 ``--feature`` chosen (default ``score_split``, what the package calibrates) it
 
 1. fits the calibration on every shape: the isotonic (non-decreasing) regression of "within
@@ -30,7 +32,7 @@ Every vertex of a mass bin takes the confidence of the bin's centre (the histogr
 no finer mass). Command::
 
     python benchmarks/calibration.py --cache DIR [--tag TAG] [-o TABLE.md]
-        [--feature score_split|score|mass|partial_score|match_score]
+        [--feature score_split|score|mass|partial_score|match_score|part_kept]
 """
 
 from __future__ import annotations
@@ -174,11 +176,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tag", help="only rows with this tag")
     parser.add_argument(
         "--feature",
-        choices=("score_split", "score", "mass", "partial_score", "match_score"),
+        choices=("score_split", "score", "mass", "partial_score", "match_score", "part_kept"),
         default="score_split",
         help="what is calibrated (score_split: the score, one table per bin of the map's local distortion; "
         "partial_score: the score of partial symmetries' maps, from benchmarks/partial.py's cache; "
-        "match_score: the score of parts' maps onto their wholes, from benchmarks/shrec16_match.py's)",
+        "match_score: the score of parts' maps onto their wholes, from benchmarks/shrec16_match.py's; "
+        "part_kept: the share of a part's short distances its map keeps, from the same)",
     )
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown here")
     args = parser.parse_args(argv)
@@ -188,17 +191,22 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     text = markdown(rows)
     values = fit(rows)
-    name, tables = "CALIBRATION", confidence.CALIBRATION
-    if args.feature == "partial_score":
-        name, tables = "PARTIAL_CALIBRATION", (confidence.PARTIAL_CALIBRATION,)
-    elif args.feature == "match_score":
-        name, tables = "PART_CALIBRATION", (confidence.PART_CALIBRATION,)
-    shipped = np.concatenate(tables)
-    same = values.shape == shipped.shape and np.allclose(values, shipped, atol=5e-4)
-    same_text = "equal to" if same else "differs from"
-    text += f"\nFit on all {len(rows)} shapes ({same_text} intrinsym.globalmap.confidence.{name}):\n\n"
-    text += f"{name} = (\n"
-    text += "".join(f"    ({', '.join(f'{v:.3f}' for v in t)}),\n" for t in np.split(values, len(tables))) + ")\n"
+    # the features the package calibrates, with their tables; the others are diagnostics
+    shipped_tables = {
+        "score_split": ("CALIBRATION", confidence.CALIBRATION),
+        "partial_score": ("PARTIAL_CALIBRATION", (confidence.PARTIAL_CALIBRATION,)),
+        "part_kept": ("PART_CALIBRATION", (confidence.PART_CALIBRATION,)),
+    }
+    name, tables = shipped_tables.get(args.feature, (args.feature.upper(), ()))
+    if tables:
+        shipped = np.concatenate(tables)
+        same = values.shape == shipped.shape and np.allclose(values, shipped, atol=5e-4)
+        compared = f"{'equal to' if same else 'differs from'} intrinsym.globalmap.confidence.{name}"
+    else:
+        compared = "no table of the package"
+    text += f"\nFit on all {len(rows)} shapes ({compared}):\n\n"
+    groups = np.split(values, len(values) // rows[0]["reliability"].get("bins", len(values)))
+    text += f"{name} = (\n" + "".join(f"    ({', '.join(f'{v:.3f}' for v in t)}),\n" for t in groups) + ")\n"
     print(text)
     if args.out:
         args.out.write_text(text)

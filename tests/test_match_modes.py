@@ -12,6 +12,7 @@ import intrinsym
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
 from intrinsym.globalmap import confidence
+from intrinsym.globalmap.part_map import PartMapStats
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.pipeline import invert_part_match
@@ -66,20 +67,20 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
 
 def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, half_matched, tmp_path):
     """A part matched to its whole is told apart in run.json; its confidence is the
-    score through PART_CALIBRATION (fitted on SHREC'16 parts), not the complete shapes'
-    tables, and a loaded result says the same."""
+    share of the part's distances its map keeps through PART_CALIBRATION (fitted on
+    SHREC'16 parts), the same at every mapped vertex, not the complete shapes' tables,
+    and a loaded result says the same."""
     result = half_matched
     assert result.info.part and result.calibration_table() is confidence.PART_CALIBRATION
     mapped = result.symmetry_map() >= 0
-    own = confidence.calibrated(result.symmetry_score(), table=confidence.PART_CALIBRATION)
+    stats = result.info.part_map
+    own = confidence.calibrated(np.array([stats.kept]), table=confidence.PART_CALIBRATION)[0]
     conf = result.symmetry_confidence()
-    assert mapped.any() and np.allclose(conf[mapped], own[mapped], atol=1e-6) and not conf[~mapped].any()
-    assert conf.max() <= max(confidence.PART_CALIBRATION)
+    assert mapped.any() and np.allclose(conf[mapped], own, atol=1e-6) and not conf[~mapped].any()
     back = intrinsym.Result.load(result.save(tmp_path / "out"))
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
     # the source is the part: its map is the extraction's or the partial functional map's,
     # whichever changes fewer of its distances, and run.json says which
-    stats = result.info.part_map
     assert stats is not None and "part map" in result.info.seconds
     kept = stats.distortion[stats.source]
     assert kept is not None and all(d is None or kept <= d for d in stats.distortion.values())
@@ -87,7 +88,8 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
     assert back.info.part_map == stats and np.array_equal(back.symmetry_map(), result.symmetry_map())
     half, whole, _ = half_and_whole
     off = intrinsym.match(half, whole, intrinsym.make_params(**SMALL, part_fmap=False))
-    assert off.info.part_map is None and "part map" not in off.info.seconds
+    assert off.global_map is None and off.info.part_map is not None
+    assert off.info.part_map.source == "extraction" and list(off.info.part_map.distortion) == ["extraction"]
 
 
 def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, half_matched, tmp_path):
@@ -106,6 +108,11 @@ def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and
     back = intrinsym.Result.load(result.save(tmp_path / "out"))
     assert back.info.target_part and np.array_equal(back.symmetry_map(), found)
     assert not back.symmetry_confidence()[found < 0].any()
+    # its confidence reads the distortion of the map it inverts: the part's extraction's
+    share = half_matched.info.part_map.distortion["extraction"]
+    assert result.info.part_map == back.info.part_map == PartMapStats("extraction", {"extraction": share})
+    own = confidence.calibrated(np.array([1.0 - share]), table=confidence.PART_CALIBRATION)[0]
+    assert np.allclose(back.symmetry_confidence()[found >= 0], own, atol=1e-6)
 
 
 @pytest.mark.slow  # two matches at 150 / 1500, the size its shares were measured at (CI: -m slow)

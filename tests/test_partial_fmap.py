@@ -12,7 +12,7 @@ import trimesh
 
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
-from intrinsym.globalmap import part_map, partial_fmap
+from intrinsym.globalmap import confidence, part_map, partial_fmap
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.surface import prepare_pair
@@ -138,6 +138,13 @@ def test_the_less_distorted_map_is_kept(figure_and_part, monkeypatch) -> None:
     image, stats = part_map.choose_part_map(used.copy(), a, b)
     assert image is None and stats.source == "extraction"
     assert stats.distortion["extraction"] < 0.05 < stats.distortion["partial_fmap"]
+    # the share kept is the confidence's score: the true map near the table's top, a
+    # random one at its floor, measured without a partial functional map too
+    kept = {name: 1.0 - share for name, share in stats.distortion.items()}
+    assert stats.kept == kept["extraction"] > 0.95 and kept["partial_fmap"] < 0.25
+    assert confidence.calibrated(np.array([kept["partial_fmap"]]), table=confidence.PART_CALIBRATION)[0] == 0.0
+    alone = part_map.choose_part_map(used.copy(), a, b, fmap=False)
+    assert alone == (None, part_map.PartMapStats("extraction", {"extraction": stats.distortion["extraction"]}))
     monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole: true_working)
     image, stats = part_map.choose_part_map(rng.integers(0, len(used), len(used)), a, b)
     assert stats.source == "partial_fmap" and image is not None

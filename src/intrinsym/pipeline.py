@@ -574,7 +574,9 @@ def match(
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
     A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 14-20 s
-    on the SHREC'16 shapes on a 2-core machine).
+    on the SHREC'16 shapes on a 2-core machine). The share of A's short distances the
+    kept map keeps is the score of its confidence
+    (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
 
     When the target B is the part (A the whole), every source sample still takes a label,
     so A's vertices cut away on B would get an image too. The result's vertex map
@@ -604,8 +606,6 @@ def match(
         return result
     if area_a < area_b:
         result = _with_part_map(result, surf_a, surf_b, p)
-        if result.info.part_map is None:
-            return result
         clock.lap("part map")
         return dataclasses.replace(result, info=dataclasses.replace(result.info, seconds=dict(clock.seconds)))
     # The target is the part: every source sample takes a label, so the source vertices
@@ -614,18 +614,18 @@ def match(
     back_header = _match_header(sb, sa, preset, part)
     back = _solve(sampled(surf_b, surf_a, *sample_pair(surf_b, surf_a, p), p, False), p, _Clock(None), back_header)
     image = invert_part_match(back, sb, sa)
+    _, stats = choose_part_map(back.extraction_map(), surf_b, surf_a, fmap=False)
     clock.lap("reverse match")
-    info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True)
+    info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True, part_map=stats)
     return dataclasses.replace(result, global_map=image, info=info)
 
 
 def _with_part_map(result: Result, part: Surface, whole: Surface, p: Params) -> Result:
     """A part's match to its whole with the vertex map :func:`choose_part_map` keeps
-    (``global_map`` the partial functional map's when it is kept; ``info.part_map``),
-    unless ``p.part_fmap`` is off or either shape is a point cloud."""
-    if not p.part_fmap or part.shape.faces is None or whole.shape.faces is None:
-        return result
-    image, stats = choose_part_map(result.symmetry_map(), part, whole)
+    (``global_map`` the partial functional map's when it is kept; ``info.part_map``);
+    with ``p.part_fmap`` off or a point cloud, the extraction's map, measured."""
+    fmap = p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None
+    image, stats = choose_part_map(result.symmetry_map(), part, whole, fmap)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

@@ -93,15 +93,15 @@ PARTIAL_CALIBRATION = (
 #: The calibration of a part's map onto its whole (``match`` of a shape with less than
 #: ``PARTIAL_AREA`` of the other's area): the share of its vertices whose image lies
 #: within 0.05 sqrt(area) of the nearer of the true and the mirror point, per 1/20-wide
-#: bin of its score (value at the bin's centre), fitted (isotonic) over the 125 SHREC'16
-#: partial shapes matched to their null shapes by ``benchmarks/calibration.py --feature
-#: match_score`` (its maps the extraction's or the partial functional map's,
-#: :func:`intrinsym.globalmap.part_map.choose_part_map`). It is flat: there 0.44 of the
-#: images are right, and the score does not tell which (the marginals of a part's unary
-#: are nearly flat); it says how often, not where.
+#: bin of the share of the part's short distances the map keeps
+#: (:attr:`intrinsym.globalmap.part_map.PartMapStats.kept`; value at the bin's centre),
+#: fitted (isotonic) over the 125 SHREC'16 partial shapes matched to their null shapes by
+#: ``benchmarks/calibration.py --feature part_kept``. One value per map: a part's
+#: marginals are nearly flat and do not rank its images, but a map that keeps the
+#: part's distances is right on most of it, one that tears them on little.
 PART_CALIBRATION = (
-    0.442, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611,
-    0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611, 0.611,
+    0.000, 0.000, 0.000, 0.000, 0.000, 0.092, 0.150, 0.150, 0.213, 0.213,
+    0.222, 0.362, 0.431, 0.515, 0.515, 0.565, 0.755, 0.787, 0.832, 0.872,
 )  # fmt: skip
 
 

@@ -4,9 +4,11 @@
 from the marginals, and on such pairs that map is often wrong: the part's descriptors
 are not the whole's near the cuts, and BP settles on a consistent but shifted map. A
 partial functional map (:mod:`intrinsym.globalmap.partial_fmap`) is right on other pairs.
-Neither confidence tells which (docs/limitations.md); the maps' own geodesic distortion
-does: a right map keeps the part's short distances, a wrong one tears them. The map
-that changes fewer of them is kept.
+The marginals do not tell which (a part's are nearly flat, docs/limitations.md); the
+maps' own geodesic distortion does: a right map keeps the part's short distances, a
+wrong one tears them. The map that changes fewer of them is kept, and the share it
+keeps is the score the part's confidence is calibrated on
+(:data:`intrinsym.globalmap.confidence.PART_CALIBRATION`).
 """
 
 from __future__ import annotations
@@ -41,12 +43,20 @@ class PartMapStats:
         (:func:`intrinsym.globalmap.partial_fmap.partial_functional_map`).
     distortion : dict of str to float
         Per candidate, the share of the part's vertex pairs within ``PART_MAP_RADIUS``
-        whose geodesic distance the map changes by more than 0.05 sqrt(area) (None for
-        a map that gives no image); the lower one is kept.
+        whose geodesic distance the map changes by more than ``PART_MAP_CHANGE`` (None
+        for a map that gives no image); the lower one is kept. Without a partial
+        functional map (``part_fmap`` off, a point cloud) the extraction's alone.
     """
 
     source: str
     distortion: dict[str, float | None] = field(default_factory=dict)
+
+    @property
+    def kept(self) -> float | None:
+        """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance
+        the kept map keeps within ``PART_MAP_CHANGE`` (None: it gives no image)."""
+        share = self.distortion.get(self.source)
+        return None if share is None else 1.0 - share
 
 
 def _spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -83,7 +93,7 @@ def _working_inputs(surface: Surface) -> np.ndarray:
 
 
 def choose_part_map(
-    extraction_map: np.ndarray, part: Surface, whole: Surface
+    extraction_map: np.ndarray, part: Surface, whole: Surface, fmap: bool = True
 ) -> tuple[np.ndarray | None, PartMapStats]:
     """Keep the extraction's map of a part into its whole, or replace it by the partial
     functional map's when that changes fewer of the part's geodesic distances.
@@ -93,7 +103,9 @@ def choose_part_map(
     extraction_map : (N_part_input,) int
         Input vertex of the whole of every input vertex of the part, -1 for none.
     part, whole : Surface
-        As for :func:`part_fmap_map`.
+        As for :func:`part_fmap_map` (point clouds too when ``fmap`` is off).
+    fmap : bool
+        Compute the partial functional map; off, the extraction's map is only measured.
 
     Returns
     -------
@@ -104,17 +116,18 @@ def choose_part_map(
     """
     to_whole_input = _working_inputs(whole)
     extraction = np.asarray(extraction_map, dtype=np.int64)[_working_inputs(part)]
-    candidates = {
-        "extraction": np.where(extraction >= 0, whole.vertex_map[np.maximum(extraction, 0)], -1),
-        "partial_fmap": part_fmap_map(part, whole),
-    }
+    candidates = {"extraction": np.where(extraction >= 0, whole.vertex_map[np.maximum(extraction, 0)], -1)}
+    if fmap:
+        candidates["partial_fmap"] = part_fmap_map(part, whole)
     shares = {
         name: graph_map_distortion(image, part.graph, whole.graph, PART_MAP_RADIUS).above(PART_MAP_CHANGE)
         for name, image in candidates.items()
     }
-    fmap, kept = shares["partial_fmap"], shares["extraction"]  # NaN: the map gives no image
-    use = bool(np.isfinite(fmap) and (not np.isfinite(kept) or fmap < kept))
     distortion = {name: (float(s) if np.isfinite(s) else None) for name, s in shares.items()}
+    if not fmap:
+        return None, PartMapStats("extraction", distortion)
+    fmap_share, kept = shares["partial_fmap"], shares["extraction"]  # NaN: the map gives no image
+    use = bool(np.isfinite(fmap_share) and (not np.isfinite(kept) or fmap_share < kept))
     if not use:
         return None, PartMapStats("extraction", distortion)
     images = to_whole_input[candidates["partial_fmap"][part.vertex_map]]

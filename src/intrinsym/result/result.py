@@ -276,17 +276,29 @@ class Result:
         answer, for a match) (``symmetry_confidence.npy``): :meth:`symmetry_score` through
         :func:`intrinsym.globalmap.confidence.calibrated`, by the map's local distortion
         (:attr:`map_distortion`), or through one table of its own for a partial
-        symmetry's map of a shape onto itself and for a part matched to its whole
-        (:meth:`calibration_table`); where no source sample's cell reaches (a connected
-        component without samples, carried there), that of the nearest vertex a cell
-        holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where the map
-        gives no image."""
+        symmetry's map of a shape onto itself (:meth:`calibration_table`); for a part
+        matched to its whole (and a whole to its part), every vertex the same: the share
+        of the part's short distances the part's map keeps (``info.part_map``) through
+        ``PART_CALIBRATION`` (0 when unknown); where no source sample's cell reaches (a
+        connected component without samples, carried there), that of the nearest vertex
+        a cell holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where
+        the map gives no image."""
         # map_distortion is that of global_map: without it, the map scored is another
         local = self.map_distortion if self.global_map is not None else None
-        conf = calibrated(self.symmetry_score(mass), local, table=self.calibration_table())
+        conf = calibrated(self._confidence_score(mass), local, table=self.calibration_table())
         if self.support is not None and self.support.source_mesh_vertices is not None:
             conf = carried_confidence(conf, self.support.vertex_source, self.support.source_mesh_vertices)
         return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
+
+    def _confidence_score(self, mass: np.ndarray | None) -> np.ndarray:
+        """What the confidence's table reads: :meth:`symmetry_score`, or for a part's
+        match the kept share of its map at every vertex (the marginals of a part do not
+        rank its images)."""
+        if not self.info.part:
+            return self.symmetry_score(mass)
+        stats = self.info.part_map
+        kept = None if stats is None else stats.kept
+        return np.full(len(self.symmetry_map()), 0.0 if kept is None else kept)
 
     def calibration_table(self) -> tuple[float, ...] | None:
         """The one calibration table every vertex of :meth:`symmetry_map` takes, or None
