@@ -256,8 +256,9 @@ class RunInfo:
         ``global_map`` is the inverse of the part's own match to the whole, -1 ("no
         match") where the source has no counterpart on the part.
     part_map : PartMapStats or None
-        Match of a part to its whole (the source the part) with ``part_fmap``: which
-        vertex map was kept.
+        Match with ``part``: which of the part's vertex maps was kept and how much each
+        changes the part's distances (for a whole matched to its part, the part's
+        extraction map the result inverts); the score of the confidence.
     """
 
     mode: str
