@@ -5,7 +5,10 @@ Runs the default :func:`intrinsym.detect` (seed 0) on every partial shape of
 :mod:`intrinsym.evaluation.partial_truth` (distances in units of sqrt(area) of the null shape):
 the partnered share within 0.05 and 0.10, the unpartnered share left unmapped, their
 balance (mean of the first and the third) and the IoU of the best-ranked symmetry's
-parts with the truth's partnered vertices. Beside it, two baselines: "no partner
+parts with the truth's partnered vertices; two diagnostics: where the map gives an
+unpartnered vertex an image, the share of those images that are unpartnered themselves,
+and (cached, not tabulated) ``map_kept``, the share of the shape's short distances the
+map keeps (what a part's match calibrates its confidence on). Beside it, two baselines: "no partner
 anywhere" (every vertex -1) and the peer a user would pick, pyFM's orientation-reversing
 self-map (PyPI ``pyfmaps``: WKS, ``fit(w_orient=1, orient_reversing=True)``, ZoomOut
 20 -> 100), which maps every vertex. Command::
@@ -44,18 +47,19 @@ import intrinsym
 from _data import add_data_argument, data_folder, no_data
 from intrinsym.evaluation import partial_truth
 from intrinsym.extract import records
-from intrinsym.globalmap import confidence
+from intrinsym.globalmap import confidence, distortion, part_map
 from tosca import _clean_floats, _machine, _overrides, score_histogram
 
 #: Cache-format revision: a file with another one is recomputed.
 CACHE_FORMAT = 1
-#: Scores of a row, with their table headers.
+#: Scores of a row, with their table headers and the methods that have them (None: all).
 SCORES = (
-    ("balanced", "balanced"),
-    ("partnered_within_005", "partnered ≤0.05"),
-    ("partnered_within_010", "partnered ≤0.10"),
-    ("unpartnered_unmapped", "unpartnered unmapped"),
-    ("iou", "IoU best"),
+    ("balanced", "balanced", None),
+    ("partnered_within_005", "partnered ≤0.05", None),
+    ("partnered_within_010", "partnered ≤0.10", None),
+    ("unpartnered_unmapped", "unpartnered unmapped", None),
+    ("unpartnered_onto_unpartnered", "mapped unpartnered onto unpartnered", ("intrinsym",)),
+    ("iou", "IoU best", ("intrinsym", "pyfm")),
 )
 
 
@@ -123,6 +127,14 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         scored, right = _right(vmap, truth, scores)  # right: partnered, within 0.05 of the partner
         row["confidence"] = confidence_row(result.symmetry_confidence()[scored], right)
         row["reliability"] = reliability(result, vmap, truth, scores)
+        # what a part's match calibrates its confidence on (part_map.PART_MAP_RADIUS / _CHANGE),
+        # recorded to see whether it also tells a right self-map from a wrong one
+        kept = distortion.map_distortion(vmap, shape, part_map.PART_MAP_RADIUS).above(part_map.PART_MAP_CHANGE)
+        row["map_kept"] = 1.0 - kept if np.isfinite(kept) else None
+    # where the unpartnered vertices the map gives an image are sent: onto the unpartnered
+    # remains themselves (a self-map of what has no partner) or onto the partnered rest
+    sent = vmap[truth.unpartnered & (vmap >= 0)]
+    row["unpartnered_onto_unpartnered"] = float(truth.unpartnered[sent].mean()) if len(sent) else None
     row.update(scores.as_dict(), iou=iou)
     return row
 
@@ -222,19 +234,17 @@ def _value(row: dict | None, key: str) -> float:
 def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:
     """The table: a row per shape, then mean and worst per kind, per class and overall."""
     head = ["shape", "partnered share"]
-    for key, label in SCORES:
-        head += [f"{label} ({m})" for m in methods if not (key == "iou" and m == "none")]
+    columns = [(key, m) for key, _, have in SCORES for m in methods if have is None or m in have]
+    labels = {key: label for key, label, _ in SCORES}
+    head += [f"{labels[key]} ({m})" for key, m in columns]
     head += ["seconds (intrinsym)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
     def cells(name_rows: list[str], agg) -> list[str]:
         out = [f"{agg(np.array([_value(rows.get((n, 'intrinsym')), 'partnered_share') for n in name_rows])):.3f}"]
-        for key, _ in SCORES:
-            for m in methods:
-                if key == "iou" and m == "none":
-                    continue
-                values = np.array([_value(rows.get((n, m)), key) for n in name_rows])
-                out.append("–" if np.all(np.isnan(values)) else f"{agg(values):.3f}")
+        for key, m in columns:
+            values = np.array([_value(rows.get((n, m)), key) for n in name_rows])
+            out.append("–" if np.all(np.isnan(values)) else f"{agg(values):.3f}")
         seconds = np.array([_value(rows.get((n, "intrinsym")), "seconds") for n in name_rows])
         out.append(f"{np.nanmax(seconds) if agg is np.nanmin else np.nanmean(seconds):.1f}")
         return out
