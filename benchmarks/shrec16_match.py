@@ -220,12 +220,11 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     if result is not None:
         mapped = vmap >= 0
         right = {"within_0.05": errors[mapped] <= 0.05}
-        kept = result.info.part_map.kept if result.info.part_map is not None else None
-        row["reliability"] = {
-            "match_score": score_histogram(result.symmetry_score()[mapped], right),
+        row["reliability"] = {"match_score": score_histogram(result.symmetry_score()[mapped], right)}
+        if result.info.part_map is not None:
             # the score of the part's confidence: one value per pair
-            "part_kept": score_histogram(np.full(int(mapped.sum()), 0.0 if kept is None else kept), right),
-        }
+            kept = np.full(int(mapped.sum()), result.info.part_map.kept)
+            row["reliability"]["part_kept"] = score_histogram(kept, right)
         row["confidence"] = confidence_row(result.symmetry_confidence()[mapped], right["within_0.05"])
     for t in THRESHOLDS:
         row[f"within_{round(t * 100):03d}"] = float(np.mean(errors <= t))

@@ -152,3 +152,5 @@ def test_the_less_distorted_map_is_kept(figure_and_part, monkeypatch) -> None:
     # an extraction that gives no image at all is replaced
     image, stats = part_map.choose_part_map(np.full(len(used), -1), a, b)
     assert stats.source == "partial_fmap" and stats.distortion["extraction"] is None
+    # a map that gives no image keeps none of the distances
+    assert part_map.choose_part_map(np.full(len(used), -1), a, b, fmap=False)[1].kept == 0.0

@@ -52,11 +52,11 @@ class PartMapStats:
     distortion: dict[str, float | None] = field(default_factory=dict)
 
     @property
-    def kept(self) -> float | None:
+    def kept(self) -> float:
         """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance
-        the kept map keeps within ``PART_MAP_CHANGE`` (None: it gives no image)."""
+        the kept map keeps within ``PART_MAP_CHANGE`` (0 for a map that gives no image)."""
         share = self.distortion.get(self.source)
-        return None if share is None else 1.0 - share
+        return 0.0 if share is None else 1.0 - share
 
 
 def _spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -283,22 +283,19 @@ class Result:
         connected component without samples, carried there), that of the nearest vertex
         a cell holds (:func:`intrinsym.globalmap.confidence.carried_confidence`); 0 where
         the map gives no image."""
+        image = self.symmetry_map()
+        if self.info.part:
+            # a part's marginals do not rank its images: one score, its map's kept share
+            kept = 0.0 if self.info.part_map is None else self.info.part_map.kept
+            score = np.full(len(image), kept)
+        else:
+            score = self.symmetry_score(mass)
         # map_distortion is that of global_map: without it, the map scored is another
         local = self.map_distortion if self.global_map is not None else None
-        conf = calibrated(self._confidence_score(mass), local, table=self.calibration_table())
+        conf = calibrated(score, local, table=self.calibration_table())
         if self.support is not None and self.support.source_mesh_vertices is not None:
             conf = carried_confidence(conf, self.support.vertex_source, self.support.source_mesh_vertices)
-        return np.where(self.symmetry_map() >= 0, conf, 0.0).astype(np.float32)
-
-    def _confidence_score(self, mass: np.ndarray | None) -> np.ndarray:
-        """What the confidence's table reads: :meth:`symmetry_score`, or for a part's
-        match the kept share of its map at every vertex (the marginals of a part do not
-        rank its images)."""
-        if not self.info.part:
-            return self.symmetry_score(mass)
-        stats = self.info.part_map
-        kept = None if stats is None else stats.kept
-        return np.full(len(self.symmetry_map()), 0.0 if kept is None else kept)
+        return np.where(image >= 0, conf, 0.0).astype(np.float32)
 
     def calibration_table(self) -> tuple[float, ...] | None:
         """The one calibration table every vertex of :meth:`symmetry_map` takes, or None
