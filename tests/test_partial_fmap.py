@@ -1,7 +1,6 @@
 """Partial functional maps (globalmap/partial_fmap.py): the gradient against linear
 functions, the commutativity term and the C-step against their dense Kronecker forms, the
-wave-kernel density against its definition, and a part of the posed figure mapped into
-the figure."""
+spin-image descriptors' locality, and a part of the posed figure mapped into the figure."""
 
 from __future__ import annotations
 
@@ -15,8 +14,8 @@ from intrinsym.geodesics import geodesics
 from intrinsym.globalmap import confidence, part_map, partial_fmap
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
+from intrinsym.params import Params
 from intrinsym.surface import prepare_pair
-from intrinsym.unary import descriptors
 
 
 def test_the_gradient_of_a_linear_function_is_its_tangent_part() -> None:
@@ -76,19 +75,6 @@ def test_the_normal_equations_are_solved_as_the_dense_system_solves_them() -> No
         assert np.allclose(found, dense, rtol=1e-7, atol=1e-9 * np.abs(dense).max())
 
 
-def test_the_wave_kernel_density_is_the_signature_before_its_normalisation() -> None:
-    rng = np.random.default_rng(2)
-    evals = np.concatenate([[0.0], np.sort(rng.uniform(1.0, 50.0, 11))])
-    evecs = rng.normal(size=(6, 12))
-    energies, sigma = descriptors.wks_energies(evals, 8)
-    density = descriptors.wave_kernel_density(evals, evecs, energies, sigma)
-    weights = np.exp(-((energies[:, None] - np.log(evals[None, 1:])) ** 2) / (2 * sigma**2))  # (E, K - 1)
-    by_point = np.array([[np.sum(evecs[x, 1:] ** 2 * w) for w in weights] for x in range(6)])
-    assert np.allclose(density, by_point)
-    signature = descriptors.wave_kernel_signature(evals, evecs, energies, sigma)
-    assert np.allclose(np.log(density / weights.sum(axis=1)), signature)
-
-
 @pytest.fixture(scope="module")
 def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
     """The posed figure (434 vertices) and the vertices of it above y = -1 (one limb's
@@ -117,11 +103,32 @@ def _right(figure: shapes.GeneratedShape, used: np.ndarray, images: np.ndarray) 
     return float(np.mean(errors <= 0.10))
 
 
+def test_a_cut_changes_the_descriptors_only_near_it(figure_and_part) -> None:
+    """The part's descriptor functions equal the whole's at the same vertices away from
+    the cut (farther than the spin radius), up to the sampling of the images: their
+    difference there is a small share of the difference between two vertices."""
+    figure, used = figure_and_part
+    p = Params()
+    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    d_part, d_whole = part_map.part_descriptors(a, b, p)
+    assert d_part.shape == (len(a.shape.vertices), part_map.SPIN_COMPONENTS) and d_whole.shape[1] == d_part.shape[1]
+    assert d_whole.min() == 0.0
+    # the part's working vertices on the whole's working mesh, and their distance to the cut
+    on_whole = b.vertex_map[used[a.nearest_input_vertex(a.shape.vertices)]]
+    cut = b.shape.vertices[b.vertex_map[np.setdiff1d(np.arange(len(figure.vertices)), used)]]
+    far = np.linalg.norm(a.shape.vertices[:, None] - cut[None], axis=2).min(axis=1) > 1.5 * p.spin_radius
+    assert far.sum() > 50
+    same = np.linalg.norm(d_part[far] - d_whole[on_whole[far]], axis=1)
+    rng = np.random.default_rng(0)
+    other = np.linalg.norm(d_whole[on_whole[far]] - d_whole[rng.permutation(on_whole[far])], axis=1)
+    assert np.median(same) < 0.3 * np.median(other)
+
+
 def test_a_part_of_the_figure_maps_onto_its_place(figure_and_part) -> None:
     # measured at this size: 0.92 within 0.10, the indicator covering 0.98 of the part's area
     figure, used = figure_and_part
     a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
-    images = part_map.part_fmap_map(a, b)
+    images = part_map.part_fmap_map(a, b, Params())
     to_input = b.nearest_input_vertex(b.shape.vertices)[images[a.vertex_map]]
     assert _right(figure, used, to_input) >= 0.85
 
@@ -134,8 +141,8 @@ def test_the_less_distorted_map_is_kept(figure_and_part, monkeypatch) -> None:
     rng = np.random.default_rng(0)
     true_working = b.vertex_map[used[a.nearest_input_vertex(a.shape.vertices)]]
     random_working = rng.integers(0, len(b.shape.vertices), len(a.shape.vertices))
-    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole: random_working)
-    image, stats = part_map.choose_part_map(used.copy(), a, b)
+    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole, p: random_working)
+    image, stats = part_map.choose_part_map(used.copy(), a, b, Params())
     assert image is None and stats.source == "extraction"
     assert stats.distortion["extraction"] < 0.05 < stats.distortion["partial_fmap"]
     # the share kept is the confidence's score: the true map near the table's top, a
@@ -143,14 +150,14 @@ def test_the_less_distorted_map_is_kept(figure_and_part, monkeypatch) -> None:
     kept = {name: 1.0 - share for name, share in stats.distortion.items()}
     assert stats.kept == kept["extraction"] > 0.95 and kept["partial_fmap"] < 0.25
     assert confidence.calibrated(np.array([kept["partial_fmap"]]), table=confidence.PART_CALIBRATION)[0] == 0.0
-    alone = part_map.choose_part_map(used.copy(), a, b, fmap=False)
+    alone = part_map.choose_part_map(used.copy(), a, b, Params(), fmap=False)
     assert alone == (None, part_map.PartMapStats("extraction", {"extraction": stats.distortion["extraction"]}))
-    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole: true_working)
-    image, stats = part_map.choose_part_map(rng.integers(0, len(used), len(used)), a, b)
+    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole, p: true_working)
+    image, stats = part_map.choose_part_map(rng.integers(0, len(used), len(used)), a, b, Params())
     assert stats.source == "partial_fmap" and image is not None
     assert np.array_equal(image, used)
     # an extraction that gives no image at all is replaced
-    image, stats = part_map.choose_part_map(np.full(len(used), -1), a, b)
+    image, stats = part_map.choose_part_map(np.full(len(used), -1), a, b, Params())
     assert stats.source == "partial_fmap" and stats.distortion["extraction"] is None
     # a map that gives no image keeps none of the distances
-    assert part_map.choose_part_map(np.full(len(used), -1), a, b, fmap=False)[1].kept == 0.0
+    assert part_map.choose_part_map(np.full(len(used), -1), a, b, Params(), fmap=False)[1].kept == 0.0

@@ -614,7 +614,7 @@ def match(
     back_header = _match_header(sb, sa, preset, part)
     back = _solve(sampled(surf_b, surf_a, *sample_pair(surf_b, surf_a, p), p, False), p, _Clock(None), back_header)
     image = invert_part_match(back, sb, sa)
-    _, stats = choose_part_map(back.extraction_map(), surf_b, surf_a, fmap=False)
+    _, stats = choose_part_map(back.extraction_map(), surf_b, surf_a, p, fmap=False)
     clock.lap("reverse match")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True, part_map=stats)
     return dataclasses.replace(result, global_map=image, info=info)
@@ -625,7 +625,7 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, p: Params) -> 
     (``global_map`` the partial functional map's when it is kept; ``info.part_map``);
     with ``p.part_fmap`` off or a point cloud, the extraction's map, measured."""
     fmap = p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None
-    image, stats = choose_part_map(result.symmetry_map(), part, whole, fmap)
+    image, stats = choose_part_map(result.symmetry_map(), part, whole, p, fmap)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

@@ -16,13 +16,25 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from ..mesh.sampling import area_uniform_points
+from ..params import Params
 from ..spectral import laplacian
 from ..surface import Surface
+from ..unary.descriptors import spin_images
 from .distortion import graph_map_distortion
 from .partial_fmap import EIGENPAIRS, partial_functional_map
 
-__all__ = ["PART_MAP_CHANGE", "PART_MAP_RADIUS", "PartMapStats", "choose_part_map", "part_fmap_map"]
+__all__ = [
+    "PART_MAP_CHANGE",
+    "PART_MAP_RADIUS",
+    "PartMapStats",
+    "choose_part_map",
+    "part_descriptors",
+    "part_fmap_map",
+    "spin_functions",
+]
 
 #: Pairs of the part within this geodesic distance (sqrt(area) of the whole) are compared...
 PART_MAP_RADIUS = 0.25
@@ -30,6 +42,12 @@ PART_MAP_RADIUS = 0.25
 #: On the 125 SHREC'16 pairs the share of changed pairs ranks the right maps (within
 #: 0.10 on >= 0.80 of the vertices) above the wrong ones (< 0.50) with an AUC of 0.999.
 PART_MAP_CHANGE = 0.05
+#: The partial functional map's descriptors are spin images at this many area-uniform
+#: points of each shape (every vertex taking its nearest point's)...
+SPIN_POINTS = 1500
+#: ...projected onto this many principal components of the whole's (both set once, not
+#: tuned: the 125 SHREC'16 pairs were measured at these values alone).
+SPIN_COMPONENTS = 30
 
 
 @dataclass(frozen=True)
@@ -67,13 +85,61 @@ def _spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return evals, evecs, np.asarray(mass.diagonal()).ravel()
 
 
-def part_fmap_map(part: Surface, whole: Surface) -> np.ndarray:
+def spin_functions(surface: Surface, p: Params) -> np.ndarray:
+    """The spin image at every working vertex of a mesh, as a function on the mesh.
+
+    Spin images (the unary's ``p.spin_radius``, ``p.spin_bins``, ``p.spin_cloud``) at
+    the vertices nearest ``SPIN_POINTS`` area-uniform points (seed ``p.seed + 3``);
+    every vertex takes its nearest such vertex's image, which costs a fraction of an
+    image per vertex and varies no faster than the images themselves.
+
+    Returns
+    -------
+    (N_working, spin_bins^2) float64, each row summing to 1 (or all 0).
+    """
+    shape = surface.shape
+    if shape.faces is None:
+        raise ValueError("spin functions need a mesh, not a point cloud")
+    points = area_uniform_points(shape.vertices, shape.faces, SPIN_POINTS, seed=p.seed + 3)[0]
+    at = np.unique(cKDTree(shape.vertices).query(points)[1])
+    cloud = area_uniform_points(shape.vertices, shape.faces, p.spin_cloud, seed=p.seed)[0]
+    images = spin_images(shape.vertices[at], surface.normals[at], cloud, p.spin_radius, p.spin_bins)
+    nearest = cKDTree(shape.vertices[at]).query(shape.vertices)[1]
+    return images.reshape(len(at), -1).astype(np.float64)[nearest]
+
+
+def part_descriptors(part: Surface, whole: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:
+    """The partial functional map's descriptor functions on a part and on its whole.
+
+    Spin images (:func:`spin_functions`) are local and invariant to reflections: a cut
+    or a hole changes them only within ``p.spin_radius``, where the whole's spectral
+    signatures change everywhere: on the 125 SHREC'16 pairs, ``match`` keeps 0.668 of
+    the vertices within 0.10 of the nearer answer with them, 0.546 with wave-kernel
+    densities in their place (docs/results.md). Both are projected onto the
+    ``SPIN_COMPONENTS`` leading principal components of the whole's images and shifted
+    by the same offset to be non-negative on the whole.
+
+    Returns
+    -------
+    (N_part_working, SPIN_COMPONENTS) and (N_whole_working, SPIN_COMPONENTS) float64
+    """
+    d_part, d_whole = spin_functions(part, p), spin_functions(whole, p)
+    mean = d_whole.mean(axis=0)
+    axes = np.linalg.svd(d_whole - mean, full_matrices=False)[2][:SPIN_COMPONENTS].T
+    on_whole = (d_whole - mean) @ axes
+    low = on_whole.min(axis=0)
+    return (d_part - mean) @ axes - low, on_whole - low
+
+
+def part_fmap_map(part: Surface, whole: Surface, p: Params) -> np.ndarray:
     """The partial functional map of a part into its whole, on their working meshes.
 
     Parameters
     ----------
     part, whole : Surface
         Meshes (not point clouds), prepared in one unit (:func:`intrinsym.surface.prepare_pair`).
+    p : Params
+        The spin images' parameters (:func:`part_descriptors`).
 
     Returns
     -------
@@ -84,7 +150,7 @@ def part_fmap_map(part: Surface, whole: Surface) -> np.ndarray:
         raise ValueError("a partial functional map needs two meshes, not point clouds")
     evals_w, evecs_w, mass_w = _spectrum(whole)
     pair = (evals_w, evecs_w, mass_w, whole.shape.vertices, whole.shape.faces)
-    return partial_functional_map(_spectrum(part), pair).images
+    return partial_functional_map(_spectrum(part), pair, part_descriptors(part, whole, p)).images
 
 
 def _working_inputs(surface: Surface) -> np.ndarray:
@@ -93,7 +159,7 @@ def _working_inputs(surface: Surface) -> np.ndarray:
 
 
 def choose_part_map(
-    extraction_map: np.ndarray, part: Surface, whole: Surface, fmap: bool = True
+    extraction_map: np.ndarray, part: Surface, whole: Surface, p: Params, fmap: bool = True
 ) -> tuple[np.ndarray | None, PartMapStats]:
     """Keep the extraction's map of a part into its whole, or replace it by the partial
     functional map's when that changes fewer of the part's geodesic distances.
@@ -104,6 +170,8 @@ def choose_part_map(
         Input vertex of the whole of every input vertex of the part, -1 for none.
     part, whole : Surface
         As for :func:`part_fmap_map` (point clouds too when ``fmap`` is off).
+    p : Params
+        As for :func:`part_fmap_map`.
     fmap : bool
         Compute the partial functional map; off, the extraction's map is only measured.
 
@@ -118,7 +186,7 @@ def choose_part_map(
     extraction = np.asarray(extraction_map, dtype=np.int64)[_working_inputs(part)]
     candidates = {"extraction": np.where(extraction >= 0, whole.vertex_map[np.maximum(extraction, 0)], -1)}
     if fmap:
-        candidates["partial_fmap"] = part_fmap_map(part, whole)
+        candidates["partial_fmap"] = part_fmap_map(part, whole, p)
     shares = {
         name: graph_map_distortion(image, part.graph, whole.graph, PART_MAP_RADIUS).above(PART_MAP_CHANGE)
         for name, image in candidates.items()

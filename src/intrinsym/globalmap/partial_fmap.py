@@ -18,10 +18,11 @@ j-th descriptor on M and of the same descriptor times ``eta`` on N, and
 reweighted least squares, the v-step L-BFGS-B. The vertex map is then refined by ZoomOut
 restricted to the counterpart (``eta > 1/2``), the bases growing along the slope.
 
-The descriptors are wave-kernel densities (:func:`intrinsym.unary.descriptors.wave_kernel_density`),
-not the normalised signature: summed over a part's eigenvalues in a band, they compare
-with the whole's at the same points. The constants below were chosen on 10 of the 125
-SHREC'16 partial shapes and held on the other 115 (docs/results.md).
+The descriptors are given as functions on both meshes (local ones, which a cut far
+away leaves alone: :func:`intrinsym.globalmap.part_map.part_descriptors`), each scaled
+to unit L2 norm on the whole and by the same factor on the part. The constants below
+were chosen on 10 of the 125 SHREC'16 partial shapes, with wave-kernel densities as the
+descriptors, and held on the other 115 and with the spin images (docs/results.md).
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ from scipy.sparse.linalg import LinearOperator, cg
 from threadpoolctl import threadpool_limits
 
 from ..spectral.neighbours import nearest_rows
-from ..unary.descriptors import wave_kernel_density
 
 __all__ = ["PartialMap", "gradient_operator", "partial_functional_map"]
 
@@ -43,8 +43,7 @@ __all__ = ["PartialMap", "gradient_operator", "partial_functional_map"]
 EIGENPAIRS = 121
 #: The whole's basis size of the alternating solve; the part's follows the slope.
 BASIS = 60
-#: Wave-kernel energies, and those of them the commutativity term uses.
-ENERGIES = 60
+#: Descriptors the commutativity term uses (evenly spread over the given ones).
 COMMUTING = 15
 #: Weights of the slanted diagonal, the commutativity, the area and the boundary.
 MU_W, MU_DC, MU_A, MU_P = 10.0, 3.0, 5.0, 0.02
@@ -122,24 +121,12 @@ def _part_basis(evals_part: np.ndarray, evals_whole: np.ndarray, k_whole: int) -
     return int(np.clip(k, 5, len(evals_part)))
 
 
-def _descriptors(
-    evals_part: np.ndarray,
-    evecs_part: np.ndarray,
-    evals_whole: np.ndarray,
-    evecs_whole: np.ndarray,
-    mass_whole: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Wave-kernel densities at the same energies (from the whole's spectrum) on both
-    shapes, each energy scaled to unit L2 norm on the whole, the same factor on the part."""
-    lam = evals_whole[1:]
-    lo, hi = np.log(lam[0]), np.log(lam[-1])
-    sigma = 7 * (hi - lo) / ENERGIES
-    energies = np.linspace(lo + 2 * sigma, hi - 2 * sigma, ENERGIES)
-    # the part's eigenpairs up to the whole's largest eigenvalue and the Gaussian's reach
-    k_part = int(np.clip(np.searchsorted(evals_part, np.exp(hi + 2 * sigma)), 10, len(evals_part)))
-    whole = wave_kernel_density(evals_whole, evecs_whole, energies, sigma)
-    part = wave_kernel_density(evals_part[:k_part], evecs_part[:, :k_part], energies, sigma)
-    scale = 1.0 / np.sqrt((mass_whole[:, None] * whole**2).sum(axis=0))
+def _scaled(descriptors: tuple[np.ndarray, np.ndarray], mass_whole: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The part's and the whole's descriptor functions, each column scaled to unit L2
+    norm on the whole, the same factor on the part."""
+    part, whole = (np.asarray(d, dtype=np.float64) for d in descriptors)
+    norm = np.sqrt((mass_whole[:, None] * whole**2).sum(axis=0))
+    scale = 1.0 / np.maximum(norm, np.finfo(np.float64).tiny)
     return part * scale, whole * scale
 
 
@@ -296,6 +283,7 @@ def _restricted_zoomout(
 def partial_functional_map(
     part: tuple[np.ndarray, np.ndarray, np.ndarray],
     whole: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    descriptors: tuple[np.ndarray, np.ndarray],
 ) -> PartialMap:
     """Map a part of a shape into the whole shape (Rodolà et al. 2017, see the module).
 
@@ -308,6 +296,8 @@ def partial_functional_map(
         eigenfunctions (N_part, K) and lumped vertex areas (N_part,); K >= ``BASIS``.
     whole : tuple (evals, evecs, mass, vertices, faces)
         The same of the whole (K >= ``ZOOMOUT_BASIS``), with its mesh (N_whole, 3) and (F, 3).
+    descriptors : pair of (N_part, Q) and (N_whole, Q) float arrays
+        The same Q descriptor functions on the part and on the whole.
 
     Returns
     -------
@@ -316,17 +306,18 @@ def partial_functional_map(
     # (N, 60) products a few hundred times: OpenBLAS's threads made them 2.9x slower
     # (13.5 s against 4.7 s on a SHREC'16 pair, the 2-core Xeon VM)
     with threadpool_limits(1, user_api="blas"):
-        return _partial_functional_map(part, whole)
+        return _partial_functional_map(part, whole, descriptors)
 
 
 def _partial_functional_map(
     part: tuple[np.ndarray, np.ndarray, np.ndarray],
     whole: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    descriptors: tuple[np.ndarray, np.ndarray],
 ) -> PartialMap:
     evals_p, evecs_p, mass_p = part
     evals_w, evecs_w, mass_w, vertices, faces = whole
     grad, face_areas = gradient_operator(vertices, faces)
-    d_part, d_whole = _descriptors(evals_p, evecs_p, evals_w, evecs_w, mass_w)
+    d_part, d_whole = _scaled(descriptors, mass_w)
     k_w = min(BASIS, len(evals_w))
     k_p = _part_basis(evals_p, evals_w, k_w)
     # contiguous copies: the v-step multiplies by them a few hundred times

@@ -478,27 +478,6 @@ def _wks_weights(evals: np.ndarray, energies: np.ndarray, sigma: float) -> tuple
     return c, np.exp(-((energies[:, None] - log_lam[None, :]) ** 2) / (2.0 * sigma**2))
 
 
-def wave_kernel_density(evals: np.ndarray, evecs: np.ndarray, energies: np.ndarray, sigma: float) -> np.ndarray:
-    """The wave kernel's local density of states, ``sum_k phi_k(x)^2 f_e(lambda_k)^2``.
-
-    :func:`wave_kernel_signature` before its division by ``sum_k f_e(lambda_k)^2``: the
-    number of eigenvalues in the band does not cancel, so that a part of a shape, whose
-    band holds fewer (and larger) eigenfunctions, keeps about the whole's value at the
-    same point (:mod:`intrinsym.globalmap.partial_fmap`). Also pyFM's ``WKS`` unscaled.
-
-    Parameters
-    ----------
-    evals, evecs, energies, sigma
-        As for :func:`wave_kernel_signature`.
-
-    Returns
-    -------
-    (P, E) float64, in 1 / length^2 (not a logarithm).
-    """
-    c, coef = _wks_weights(evals, energies, sigma)
-    return (evecs[:, c:] ** 2) @ coef.T
-
-
 def hks_times(evals: np.ndarray, n_times: int = 100) -> np.ndarray:
     """Diffusion times of the heat-kernel signature (Sun, Ovsjanikov, Guibas 2009).
 
