@@ -22,7 +22,7 @@ from ..mesh.sampling import area_uniform_points
 from ..params import Params
 from ..spectral import laplacian
 from ..surface import Surface
-from ..unary.descriptors import spin_images
+from ..unary.unary import spin_images_at
 from .distortion import graph_map_distortion
 from .partial_fmap import EIGENPAIRS, partial_functional_map
 
@@ -88,8 +88,8 @@ def _spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def spin_functions(surface: Surface, p: Params) -> np.ndarray:
     """The spin image at every working vertex of a mesh, as a function on the mesh.
 
-    Spin images (the unary's ``p.spin_radius``, ``p.spin_bins``, ``p.spin_cloud``) at
-    the vertices nearest ``SPIN_POINTS`` area-uniform points (seed ``p.seed + 3``);
+    The unary's spin images (:func:`intrinsym.unary.unary.spin_images_at`, radius
+    ``p.spin_radius``) at the vertices nearest ``SPIN_POINTS`` area-uniform points (seed ``p.seed + 3``);
     every vertex takes its nearest such vertex's image, which costs a fraction of an
     image per vertex and varies no faster than the images themselves.
 
@@ -102,8 +102,7 @@ def spin_functions(surface: Surface, p: Params) -> np.ndarray:
         raise ValueError("spin functions need a mesh, not a point cloud")
     points = area_uniform_points(shape.vertices, shape.faces, SPIN_POINTS, seed=p.seed + 3)[0]
     at = np.unique(cKDTree(shape.vertices).query(points)[1])
-    cloud = area_uniform_points(shape.vertices, shape.faces, p.spin_cloud, seed=p.seed)[0]
-    images = spin_images(shape.vertices[at], surface.normals[at], cloud, p.spin_radius, p.spin_bins)
+    images = spin_images_at(surface, at, p.spin_radius, p)
     nearest = cKDTree(shape.vertices[at]).query(shape.vertices)[1]
     return images.reshape(len(at), -1).astype(np.float64)[nearest]
 

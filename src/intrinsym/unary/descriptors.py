@@ -466,16 +466,10 @@ def wave_kernel_signature(evals: np.ndarray, evecs: np.ndarray, energies: np.nda
     -------
     (P, E) float64, ``log WKS``; for unit-area shapes scale-free.
     """
-    c, coef = _wks_weights(evals, energies, sigma)
+    c = constant_modes(evals)
+    coef = np.exp(-((energies[:, None] - np.log(evals[c:])[None, :]) ** 2) / (2.0 * sigma**2))  # (E, K - c)
     wks = (evecs[:, c:] ** 2) @ coef.T / coef.sum(axis=1)
     return np.log(np.maximum(wks, np.finfo(np.float64).tiny))
-
-
-def _wks_weights(evals: np.ndarray, energies: np.ndarray, sigma: float) -> tuple[int, np.ndarray]:
-    """The constant modes to skip and the weights ``f_e(lambda_k)^2``, (E, K - c)."""
-    c = constant_modes(evals)
-    log_lam = np.log(evals[c:])
-    return c, np.exp(-((energies[:, None] - log_lam[None, :]) ** 2) / (2.0 * sigma**2))
 
 
 def hks_times(evals: np.ndarray, n_times: int = 100) -> np.ndarray:

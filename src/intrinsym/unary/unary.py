@@ -149,23 +149,31 @@ def calibrated_potential(distances: list[np.ndarray], scales: list, floor: float
     return np.maximum(np.exp(-exponent), floor)
 
 
-def spin_descriptors(surface: Surface, vertices: np.ndarray, radius: float, p: Params) -> np.ndarray:
-    """Quantised spin images of working vertices with support ``radius``.
-
-    Built from ``p.spin_cloud`` area-uniform surface points (the shape's own points for
-    a cloud), ``p.spin_bins`` bins per side, ``p.spin_levels`` intensity levels.
+def spin_images_at(surface: Surface, vertices: np.ndarray, radius: float, p: Params) -> np.ndarray:
+    """Spin images of working vertices with support ``radius``, built from
+    ``p.spin_cloud`` area-uniform surface points (seed ``p.seed``; the shape's own points
+    for a cloud), ``p.spin_bins`` bins per side.
 
     Returns
     -------
-    (n, bins^2) uint8
+    (n, bins, bins) float32, each image summing to 1 (or all 0).
     """
     shape = surface.shape
     if shape.faces is None:
         cloud = shape.vertices
     else:
         cloud = sampling.area_uniform_points(shape.vertices, shape.faces, p.spin_cloud, seed=p.seed)[0]
-    images = descriptors.spin_images(shape.vertices[vertices], surface.normals[vertices], cloud, radius, p.spin_bins)
-    return descriptors.quantize(images, p.spin_levels)
+    return descriptors.spin_images(shape.vertices[vertices], surface.normals[vertices], cloud, radius, p.spin_bins)
+
+
+def spin_descriptors(surface: Surface, vertices: np.ndarray, radius: float, p: Params) -> np.ndarray:
+    """:func:`spin_images_at` quantised to ``p.spin_levels`` intensity levels.
+
+    Returns
+    -------
+    (n, bins^2) uint8
+    """
+    return descriptors.quantize(spin_images_at(surface, vertices, radius, p), p.spin_levels)
 
 
 def spectrum(surface: Surface, k: int, coarse: int) -> Spectrum:
