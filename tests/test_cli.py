@@ -62,6 +62,26 @@ def test_detect_trivial_weight(tmp_path, capsys):
     assert p.returncode == 2 and "unrecognized arguments: --trivial-weight" in p.stderr
 
 
+def test_match_takes_the_targets_symmetry(tmp_path, capsys, example_detected):
+    """``match A B --target-symmetry DETECT_OUT``: the second mode is B's detected
+    symmetry after the first; a map of the wrong length is one line naming its file,
+    exit 2, and no output."""
+    detected, _ = example_detected
+    spot = intrinsym.example_path()
+    out = tmp_path / "m"
+    p = cli_run(capsys, "match", spot, spot, "-o", out, "-q", *SMALL, "--target-symmetry", detected)
+    assert p.returncode == 0, p.stderr
+    symmetry = np.load(detected / "symmetry_map.npy")
+    first, second = np.load(out / "mode_maps.npy")
+    assert np.array_equal(second, np.where(first >= 0, symmetry[first], -1))
+    assert np.array_equal(intrinsym.Result.load(out).target_symmetry, symmetry)
+    short = tmp_path / "short.npy"
+    np.save(short, symmetry[:-1])
+    p = cli_run(capsys, "match", spot, spot, "-o", tmp_path / "bad", *SMALL, "--target-symmetry", short)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "short.npy" in p.stderr, p.stderr
+    assert not (tmp_path / "bad").exists()
+
+
 def test_evaluate_command(tmp_path, mirror, capsys):
     v, f, sym = mirror
     mesh_path = tmp_path / "m.off"

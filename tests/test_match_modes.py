@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -153,11 +154,26 @@ def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
     assert np.mean(found[z > 0.05] >= 0) >= 0.9
 
 
-def test_a_symmetric_pair_reports_both_answers(tmp_path):
+@pytest.fixture(scope="module")
+def turned_pair() -> tuple[intrinsym.Shape, np.ndarray, intrinsym.Result]:
+    """The figure matched to itself turned by 90 degrees, given the turned copy's own
+    mirror map: the figure, the mirror and the result, shared by the two tests below."""
     figure = shapes.figure(6)
     turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
-    result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500))
+    mirror = figure.symmetries[0]
+    return a, mirror, intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500), target_symmetry=mirror)
+
+
+def _near(a: intrinsym.Shape, vmap: np.ndarray, answer: np.ndarray) -> np.ndarray:
+    """(N,) bool: ``vmap``'s images within 0.1 sqrt(area) (straight line) of ``answer``'s."""
+    return np.linalg.norm(a.vertices[vmap] - a.vertices[answer], axis=1) / np.sqrt(surface_area(a)) <= 0.1
+
+
+def test_a_symmetric_pair_reports_both_answers(turned_pair, tmp_path):
+    """Without the target's symmetry, the second answer comes from the model."""
+    a, mirror, given = turned_pair
+    result = dataclasses.replace(given, target_symmetry=None)
     assert result.params.unary == intrinsym.make_params().unary  # one whole shape and another
     assert not result.info.part and result.calibration_table() is None
     # a complete pair: no inverse map, every vertex keeps an image
@@ -165,18 +181,33 @@ def test_a_symmetric_pair_reports_both_answers(tmp_path):
     two = modes.two_modes(result)
     assert two.both
     assert 0.3 <= two.confidence[0] <= 0.7 and two.confidence.sum() == pytest.approx(1.0)
-    unit = np.sqrt(surface_area(a))
-    answers = [np.arange(len(figure.vertices)), *figure.symmetries]
-
-    def right(vmap: np.ndarray) -> np.ndarray:
-        return np.array(
-            [np.mean(np.linalg.norm(a.vertices[vmap] - a.vertices[t], axis=1) / unit <= 0.1) for t in answers]
-        )
-
-    first, second = right(two.maps[0]), right(two.maps[1])
+    answers = [np.arange(len(a.vertices)), mirror]
+    first, second = (np.array([np.mean(_near(a, m, t)) for t in answers]) for m in two.maps)
     assert first.max() >= 0.7 and second.max() >= 0.7
     assert first.argmax() != second.argmax()
     assert np.array_equal(two.maps[0], result.symmetry_map())
     out = result.save(tmp_path / "out")
     assert np.array_equal(np.load(out / "mode_maps.npy"), two.maps)
     assert json.loads((out / "modes.json").read_text()) == two.as_dict()
+
+
+def test_the_targets_symmetry_gives_the_second_answer(turned_pair, tmp_path):
+    """Given B's own symmetry map, mode 1 is it applied after mode 0: on the turned
+    figure both modes are right (one each answer) wherever mode 0 is, the two
+    confidences near one half (a symmetric pair), and a loaded result says the same."""
+    a, mirror, result = turned_pair
+    two = modes.two_modes(result)
+    assert np.array_equal(two.maps[0], result.symmetry_map())
+    assert np.array_equal(two.maps[1], np.where(two.maps[0] >= 0, mirror[two.maps[0]], -1))
+    first_true, first_mirror = _near(a, two.maps[0], np.arange(len(a.vertices))), _near(a, two.maps[0], mirror)
+    assert np.mean(first_true | first_mirror) >= 0.7
+    # where mode 0 holds one answer, mode 1 holds the other
+    assert np.mean(_near(a, two.maps[1], mirror)[first_true]) >= 0.9
+    assert np.mean(_near(a, two.maps[1], np.arange(len(a.vertices)))[first_mirror]) >= 0.9
+    assert two.both and 0.35 <= two.confidence[0] <= 0.65
+    back = intrinsym.Result.load(result.save(tmp_path / "out"))
+    assert np.array_equal(back.target_symmetry, mirror)
+    again = modes.two_modes(back)
+    assert np.array_equal(again.maps, two.maps) and np.allclose(again.confidence, two.confidence)
+    with pytest.raises(intrinsym.ParameterError, match="target_symmetry"):
+        intrinsym.match(a, a, target_symmetry=mirror[:-1])

@@ -559,6 +559,7 @@ def match(
     seed: int | None = None,
     preset: str = "default",
     progress: ProgressCallback | None = None,
+    target_symmetry: np.ndarray | Result | None = None,
 ) -> Result:
     """Marginals of the two-shape MRF: source samples on A, target labels on B.
 
@@ -573,7 +574,7 @@ def match(
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
-    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 10-17 s
+    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 10-23 s
     on the SHREC'16 shapes on a 2-core machine). The share of A's short distances the
     kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
@@ -587,11 +588,23 @@ def match(
     functional map: see :func:`invert_part_match`). The marginals, the extraction and the
     modes stay those of A to B; the second solve costs about as much as the first
     (``run.json``: ``target_part``, the stage ``reverse match``).
+
+    ``target_symmetry`` is B's own symmetry map, (N_b,) int (-1 where none) or a
+    ``detect`` result of B: the result keeps it, and its second answer
+    (:func:`~intrinsym.result.modes.two_modes`) is that symmetry applied after its map.
+    A ``detect`` of B takes about as long as a match; run it once and give it to every
+    match onto B.
+
+    Raises
+    ------
+    ParameterError
+        ``target_symmetry`` not a map of B's vertices.
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
     check_machine(p)
     clock = _Clock(progress)
     sa, sb = as_shape(a), as_shape(b)
+    symmetry = None if target_symmetry is None else checked_symmetry(target_symmetry, len(sb.vertices))
     clock.lap("load")
     surf_a, surf_b = prepare_pair(sa, sb, _min_vertices(p), p.match_scale)
     area_a, area_b = surface_area(surf_a.shape), surface_area(surf_b.shape)
@@ -602,6 +615,7 @@ def match(
     ps, pt = sample_pair(surf_a, surf_b, p)
     clock.lap("sampling")
     result = _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, _match_header(sa, sb, preset, part))
+    result = dataclasses.replace(result, target_symmetry=symmetry)
     if not part:
         return result
     if area_a < area_b:
@@ -618,6 +632,25 @@ def match(
     clock.lap("reverse match")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True, part_map=stats)
     return dataclasses.replace(result, global_map=image, info=info)
+
+
+def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarray:
+    """A shape's own symmetry map as (N,) int64 (a ``detect`` result's
+    :meth:`~intrinsym.result.result.Result.symmetry_map`), -1 where it has none.
+
+    Raises
+    ------
+    ParameterError
+        Not one integer per vertex in [-1, N).
+    """
+    vmap = symmetry.symmetry_map() if isinstance(symmetry, Result) else np.asarray(symmetry)
+    if vmap.ndim != 1 or len(vmap) != n_vertices or not np.issubdtype(vmap.dtype, np.integer):
+        raise ParameterError(
+            f"target_symmetry: need one integer per target vertex ({n_vertices}), got {vmap.dtype} {vmap.shape}"
+        )
+    if len(vmap) and (vmap.min() < -1 or vmap.max() >= n_vertices):
+        raise ParameterError(f"target_symmetry: entries must lie in [-1, {n_vertices})")
+    return vmap.astype(np.int64)
 
 
 def _with_part_map(result: Result, part: Surface, whole: Surface, p: Params) -> Result:

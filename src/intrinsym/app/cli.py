@@ -96,6 +96,12 @@ def build_parser(full: bool = False) -> argparse.ArgumentParser:
     )
     m.add_argument("a", help="source shape")
     m.add_argument("b", help="target shape")
+    m.add_argument(
+        "--target-symmetry",
+        metavar="FILE",
+        help="B's own symmetry map (a detect output folder of B, its symmetry_map.npy, or a TOSCA .sym): "
+        "the second answer (mode_maps.npy) is it applied after the map",
+    )
     cli_extra.add_model_options(m, False, full, "output directory (result.npz, run.json)")
 
     _add_output_commands(sub)
@@ -378,6 +384,16 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _target_symmetry(path: str, n_vertices: int) -> np.ndarray:
+    """``--target-symmetry``: the map in a detect output folder or a map file, (N,) int64
+    with -1 where a vertex has no image."""
+    file = Path(path) / "symmetry_map.npy" if Path(path).is_dir() else Path(path)
+    vmap = evaluate.load_symmetry_map(file, n_vertices, allow_missing=True)
+    if vmap.min() < -1:
+        raise InputError(f"{file}: a symmetry map marks no vertex 'not scored' (-2)")
+    return vmap
+
+
 def _run(args: argparse.Namespace) -> int:
     if getattr(args, "figures", False):
         require("viz", f"intrinsym {args.command} --figures")
@@ -398,6 +414,11 @@ def _run(args: argparse.Namespace) -> int:
             raise ParameterError("detect needs exactly one of MESH or --example")
         with files.output_lock(args.out):
             inputs = [load(args.mesh or example_path())] if args.command == "detect" else [load(args.a), load(args.b)]
+            target_symmetry = (
+                _target_symmetry(args.target_symmetry, len(inputs[1].vertices))
+                if args.command == "match" and args.target_symmetry
+                else None
+            )
             estimate = resources.check_run(
                 max(len(s.vertices) for s in inputs), p, str(inputs[0].path), args.command == "detect"
             )
@@ -409,7 +430,7 @@ def _run(args: argparse.Namespace) -> int:
                 if args.command == "detect":
                     result = pipeline.detect(inputs[0], p, progress=progress)
                 else:
-                    result = pipeline.match(inputs[0], inputs[1], p, progress=progress)
+                    result = pipeline.match(inputs[0], inputs[1], p, progress=progress, target_symmetry=target_symmetry)
                 out = result.save(args.out)
                 figures = viz.render(out, params=viz.FigureParams(up=args.up)) if args.figures else []
         summary = _summary(result, out)

@@ -3,9 +3,14 @@
 Matching two shapes with an intrinsic symmetry has (at least) two right answers, the
 identity and the symmetric swap; BP's marginals may hold both, or settle on one. Instead
 of one map, :func:`two_modes` reports both: mode 0 is the result's map
-(:meth:`~intrinsym.result.result.Result.symmetry_map`), mode 1 the best map that sends most
-source samples far from where mode 0 does: the best-ranked extracted symmetry of that
-kind, else each sample's strongest target away from mode 0's image. Each mode gets a
+(:meth:`~intrinsym.result.result.Result.symmetry_map`), mode 1 the best map up to the
+symmetry. Given the target's own symmetry map (``Result.target_symmetry``, e.g. a
+``detect`` of the target: it is computed once per target and reused for every shape
+matched to it), mode 1 is that symmetry applied after mode 0. Without it, mode 1 is the
+best map that sends most source samples far from where mode 0 does: the best-ranked
+extracted symmetry of that kind, else each sample's strongest target away from mode 0's
+image; BP's marginals hold the second answer only faintly (docs/limitations.md), and
+this map is right on far fewer vertices than the composed one. Each mode gets a
 quality from the model itself, which does not favour a mode because BP settled on it
 (the mean unary at the mode's images times the share of source edges whose length the
 mode keeps), and the two confidences are the qualities' shares: a symmetric pair gets
@@ -104,6 +109,23 @@ def _quality(result: Result, image: np.ndarray, graph: SourceGraph) -> float:
     return float(unary[mapped, image[mapped]].sum() / len(image) * kept)
 
 
+def _sample_images(result: Result, vmap: np.ndarray) -> np.ndarray:
+    """(S,) int64: the target sample whose cell holds each source sample's image under
+    the vertex map ``vmap``, -1 where it has none."""
+    assert result.support is not None
+    image = vmap[result.source_point_vertex]
+    return np.where(image >= 0, result.support.vertex_target[np.maximum(image, 0)], -1).astype(np.int64)
+
+
+def _composed(result: Result, symmetry: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mode 0's map and the target's ``symmetry`` applied after it, as (2, N_a) vertex
+    maps and (2, S) sample images."""
+    first = result.symmetry_map()
+    second = np.where(first >= 0, symmetry[np.maximum(first, 0)], -1).astype(np.int64)
+    maps = np.stack([first, second])
+    return maps, np.stack([_sample_images(result, m) for m in maps])
+
+
 def two_modes(result: Result) -> Modes:
     """The best map of a result and the best map up to the symmetry, with their confidences.
 
@@ -121,6 +143,9 @@ def two_modes(result: Result) -> Modes:
         raise ValueError("the result has no extraction")
     n_s = len(result.source_points)
     graph = SourceGraph.from_edges(result.edges, result.support.edge_length, n_s)
+    if result.target_symmetry is not None:
+        maps, images = _composed(result, np.asarray(result.target_symmetry, dtype=np.int64))
+        return _rated(result, maps, images, graph)
     best = result.extraction.global_symmetry
     first = best.image(n_s) if best is not None else np.asarray(result.marginals).argmax(axis=1).astype(np.int64)
     second = None
@@ -133,7 +158,12 @@ def two_modes(result: Result) -> Modes:
         second = _away(result, first)
     source = np.flatnonzero(second >= 0)
     maps = np.stack([result.symmetry_map(), result.fitted_map(Symmetry(source, second[source], 0.0, 1.0, "partial"))])
-    quality = np.array([_quality(result, first, graph), _quality(result, second, graph)])
+    return _rated(result, maps, np.stack([first, second]), graph)
+
+
+def _rated(result: Result, maps: np.ndarray, images: np.ndarray, graph: SourceGraph) -> Modes:
+    """The two modes with the qualities and confidences of their sample ``images``."""
+    quality = np.array([_quality(result, image, graph) for image in images])
     total = quality.sum()
     confidence = quality / total if total > 0 else np.array([1.0, 0.0])
-    return Modes(maps, np.stack([first, second]), quality, confidence)
+    return Modes(maps, images, quality, confidence)

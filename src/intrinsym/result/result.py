@@ -96,6 +96,11 @@ class Result:
         (:func:`intrinsym.globalmap.distortion.local_distortion`, sqrt(area) units, NaN where
         unknown), which picks the confidence's calibration table; None without it (a
         result of an earlier version: the first table).
+    target_symmetry : (N_b,) int64 or None
+        A match's target's own symmetry map (input vertices, -1 where it has none), as
+        given to :func:`intrinsym.pipeline.match`: the second of the two modes
+        (:func:`intrinsym.result.modes.two_modes`) is it applied after the first; None
+        when none was given (and for ``detect``).
     """
 
     source_points: np.ndarray
@@ -112,6 +117,7 @@ class Result:
     global_map: np.ndarray | None = None
     pass_marginals: np.ndarray | None = None
     map_distortion: np.ndarray | None = None
+    target_symmetry: np.ndarray | None = None
 
     #: Every file of the result set (:meth:`save` writes those the result has).
     FILES: ClassVar[tuple[str, ...]] = (
@@ -381,6 +387,8 @@ class Result:
             arrays["pass_marginals"] = np.asarray(self.pass_marginals, dtype=np.float32)
         if self.map_distortion is not None:
             arrays["map_distortion"] = np.asarray(self.map_distortion, dtype=np.float32)
+        if self.target_symmetry is not None:
+            arrays["target_symmetry"] = np.asarray(self.target_symmetry, dtype=np.int64)
         run = self.run_json()
 
         def write_json(content: Any, indent: int | None = None) -> Writer:
@@ -456,7 +464,7 @@ class Result:
                     else None
                 )
                 global_map, pass_marginals = get("global_map"), get("pass_marginals")
-                map_distortion = get("map_distortion")
+                map_distortion, target_symmetry = get("map_distortion"), get("target_symmetry")
         except _UNREADABLE as err:
             reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"
             raise ResultError(f"{name}: cannot read it ({reason}); run intrinsym detect again") from None
@@ -469,6 +477,7 @@ class Result:
             global_map=global_map,
             pass_marginals=pass_marginals,
             map_distortion=map_distortion,
+            target_symmetry=target_symmetry,
         )
 
 
@@ -489,6 +498,7 @@ def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
         "pass_marginals": ("P", s, t),
         "global_map": ("N",),
         "map_distortion": ("N",),
+        "target_symmetry": ("M",),
         "edge_length": (e,),
         "vertex_source": ("N",),
         "vertex_target": ("M",),
