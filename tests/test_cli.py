@@ -69,8 +69,10 @@ def test_match_takes_the_targets_symmetry(tmp_path, capsys, example_detected):
     detected, _ = example_detected
     spot = intrinsym.example_path()
     out = tmp_path / "m"
-    p = cli_run(capsys, "match", spot, spot, "-o", out, "-q", *SMALL, "--target-symmetry", detected)
+    p = cli_run(capsys, "match", spot, spot, "-o", out, *SMALL, "--target-symmetry", detected)
     assert p.returncode == 0, p.stderr
+    modes = json.loads((out / "modes.json").read_text())
+    assert f"the second from the target's symmetry): confidence {modes['confidence'][0]:.2f}" in p.stdout
     symmetry = np.load(detected / "symmetry_map.npy")
     first, second = np.load(out / "mode_maps.npy")
     assert np.array_equal(second, np.where(first >= 0, symmetry[first], -1))

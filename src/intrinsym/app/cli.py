@@ -228,7 +228,17 @@ def _summary(result: Result, out: Path) -> dict:
         "files": [f for f in Result.FILES if (out / f).is_file()],
         "global_confidence": saved_global_confidence(out, result.global_symmetry is not None),
         "identity": None if info.identity is None else dataclasses.asdict(info.identity),
+        "modes": _modes_summary(result, out),
     }
+
+
+def _modes_summary(result: Result, out: Path) -> dict | None:
+    """A match's ``modes.json`` and where its second answer came from (None without it)."""
+    path = out / "modes.json"
+    if not path.is_file():
+        return None
+    second = "target_symmetry" if result.target_symmetry is not None else "marginals"
+    return {**json.loads(path.read_text()), "second_from": second}
 
 
 def _print_summary(s: dict) -> None:
@@ -249,6 +259,13 @@ def _print_summary(s: dict) -> None:
             f"global symmetry by the reflection test alone: BP again at trivial radius {i['wider_radius']:.3g}, "
             f"{'its' if i['wider_kept'] else 'the first'} map kept (mean local distortion {second}, first "
             f"{i['distortion']:.4f})"
+        )
+    if (m := s.get("modes")) is not None:
+        source = "the target's symmetry" if m["second_from"] == "target_symmetry" else "the marginals"
+        state = "both answers stand" if m["both"] else "one answer"
+        print(
+            f"two answers (mode_maps.npy, the second from {source}): confidence "
+            f"{m['confidence'][0]:.2f} / {m['confidence'][1]:.2f}, {state}"
         )
     if s.get("global_confidence") is not None:
         print(
