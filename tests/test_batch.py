@@ -7,6 +7,7 @@ batch, and pairs mode runs ``match`` over the Sumner horse frames."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
@@ -29,10 +30,11 @@ import pytest
 import intrinsym
 from conftest import shared
 from intrinsym import Params, Result
-from intrinsym.app.batching import engine, items
+from intrinsym.app.batching import engine, items, work
 from intrinsym.app.batching import rows as batch_rows
 from intrinsym.app.cli import main
 from intrinsym.mesh import generated as shapes
+from intrinsym.result.modes import two_modes
 
 #: Tiny sizes: every item takes seconds.
 TINY = {"n_source": 20, "n_target": 200, "spin_cloud": 2000, "iterations": 5}
@@ -335,6 +337,25 @@ def test_a_manifest_sets_parameters_per_row_and_groups_pairs(meshes: Path, tmp_p
     (tmp_path / "typo.csv").write_text("mesh,n_sourec\nx.off,3\n")
     with pytest.raises(intrinsym.ParameterError, match="n_sourec"):
         items.collect([str(tmp_path / "typo.csv")], PARAMS)
+
+
+def test_a_pairs_manifest_gives_each_match_its_targets_symmetry(meshes: Path, tmp_path: Path) -> None:
+    """A ``target_symmetry`` column reaches ``match`` (the second mode is that map after
+    the first), enters the content key, and is refused without ``--pairs``."""
+    manifest = tmp_path / "pairs.csv"
+    manifest.write_text(f"source,target,target_symmetry\n{meshes / 'star.off'},{meshes / 'star.off'},star.sym.npy\n")
+    shutil.copy(meshes / "star.sym.npy", tmp_path / "star.sym.npy")
+    (item,) = items.collect([str(manifest)], PARAMS, pairs=True)
+    assert item.target_symmetry == str(tmp_path / "star.sym.npy")
+    assert items.content_key(item) != items.content_key(dataclasses.replace(item, target_symmetry=None))
+    result, _ = work._compute(item, str)
+    mirror = np.load(meshes / "star.sym.npy")
+    assert np.array_equal(result.target_symmetry, mirror)
+    first, second = two_modes(result).maps
+    assert np.array_equal(second, np.where(first >= 0, mirror[first], -1))
+    (tmp_path / "single.csv").write_text(f"mesh,target_symmetry\n{meshes / 'star.off'},star.sym.npy\n")
+    with pytest.raises(intrinsym.ParameterError, match="target_symmetry"):
+        items.collect([str(tmp_path / "single.csv")], PARAMS)
 
 
 def test_the_local_cluster_fits_the_cores_and_the_memory() -> None:

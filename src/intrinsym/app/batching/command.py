@@ -32,8 +32,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         nargs="*",
         metavar="INPUT",
         help="mesh files, folders, glob patterns (quoted) or CSV manifests: column 'mesh' (pairs: 'source' "
-        "and 'target'), optional 'symmetry_map', 'labels', 'class', 'name' and any parameter by its "
-        "Python name (docs/parameters.md)",
+        "and 'target'), optional 'symmetry_map', 'labels', 'target_symmetry' (pairs: the target's own "
+        "symmetry map), 'class', 'name' and any parameter by its Python name (docs/parameters.md)",
     )
     p.add_argument(
         "--pairs",

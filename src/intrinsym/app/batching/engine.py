@@ -269,7 +269,7 @@ def choose_transport(client: Any, transport: Transport, out: Path, items: Sequen
 
 
 def _files(item: Item) -> dict[str, bytes]:
-    paths = [p for p in (item.mesh, item.target, item.symmetry_map, item.labels) if p]
+    paths = [p for p in (item.mesh, item.target, item.symmetry_map, item.labels, item.target_symmetry) if p]
     return {p: Path(p).read_bytes() for p in paths}
 
 

@@ -3,8 +3,8 @@ folders and their content keys.
 
 Inputs are mesh files, folders (their mesh files), glob patterns or CSV manifests. A
 manifest has a ``mesh`` column (pairs: ``source`` and ``target``) and optionally
-``symmetry_map``, ``labels``, ``class``, ``name`` and one column per :class:`Params`
-field to set per row (an empty cell keeps the batch's value).
+``symmetry_map``, ``labels``, ``target_symmetry`` (pairs), ``class``, ``name`` and one
+column per :class:`Params` field to set per row (an empty cell keeps the batch's value).
 """
 
 from __future__ import annotations
@@ -28,8 +28,10 @@ from ...params import Params, describe
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl", ".xyz", ".npy")
 #: Ground-truth files ``intrinsym generate`` writes beside a mesh, never meshes themselves.
 SIDE_FILES = (".sym.npy", ".maps.npy", ".labels.npy")
+#: Manifest columns that name files (relative to the manifest).
+PATH_COLUMNS = ("mesh", "source", "target", "symmetry_map", "labels", "target_symmetry")
 #: Manifest columns that are not parameters.
-MANIFEST_COLUMNS = ("mesh", "source", "target", "symmetry_map", "labels", "class", "name")
+MANIFEST_COLUMNS = (*PATH_COLUMNS, "class", "name")
 #: Files of a complete result folder (``Result.save``).
 RESULT_FILES = ("result.npz", "run.json", "symmetries.json", "symmetry_map.npy")
 #: Files a batch writes in its output folder beside the item folders.
@@ -52,6 +54,9 @@ class Item:
         Absolute path of the target mesh (``match``); None for ``detect``.
     symmetry_map, labels : str or None
         Ground truth for the scores of ``intrinsym evaluate`` (detect only).
+    target_symmetry : str or None
+        The target's own symmetry map (match only, :func:`intrinsym.pipeline.match`'s
+        ``target_symmetry``): the second of the two answers.
     group : str
         Its class in the report (manifest ``class``, else the file name without trailing digits).
     """
@@ -62,6 +67,7 @@ class Item:
     target: str | None = None
     symmetry_map: str | None = None
     labels: str | None = None
+    target_symmetry: str | None = None
     group: str = ""
 
     @property
@@ -154,7 +160,7 @@ def read_manifest(path: str, extra: Sequence[str] = ()) -> list[dict[str, Any]]:
                     row["params"][column] = fields[column].parse(text)
                 except ParameterError as err:
                     raise ParameterError(f"{path}: manifest column {err}") from None
-            elif column in ("mesh", "source", "target", "symmetry_map", "labels"):
+            elif column in PATH_COLUMNS:
                 row[column] = str((base / text).resolve())
             elif column == "name" and not plain_name(text):
                 raise _name_error(text, f"{path}: line {line}")
@@ -205,7 +211,7 @@ def _rows(inputs: Iterable[str], extra: Sequence[str]) -> list[dict[str, Any]]:
     if not rows:
         raise InputError("no inputs")
     for row in rows:
-        for column in ("mesh", "source", "target", "symmetry_map", "labels"):
+        for column in PATH_COLUMNS:
             if column in row and not Path(row[column]).is_file():
                 raise InputError(f"{row[column]}: no such file")
     return rows
@@ -248,6 +254,8 @@ def collect(inputs: Sequence[str], params: Params, pairs: bool = False, group_by
     if not pairs:
         if any("mesh" not in row for row in rows):
             raise InputError("a manifest row without 'mesh' (source/target rows need --pairs)")
+        if any("target_symmetry" in row for row in rows):
+            raise ParameterError("the manifest column 'target_symmetry' goes with --pairs")
         names = _folder_names([row["mesh"] for row in rows])
         items = [
             Item(
@@ -289,6 +297,7 @@ def _pair_items(rows: list[dict[str, Any]], params: Params, group_by: str | None
                 mesh=a,
                 target=b,
                 params=_params(params, row),
+                target_symmetry=row.get("target_symmetry"),
                 group=row.get("class", _class_of(a)),
             )
         )
@@ -308,6 +317,7 @@ def _pair_items(rows: list[dict[str, Any]], params: Params, group_by: str | None
                         mesh=a["mesh"],
                         target=b["mesh"],
                         params=_params(params, a),
+                        target_symmetry=b.get("target_symmetry"),
                         group=group or a.get("class", _class_of(a["mesh"])),
                     )
                 )
@@ -332,6 +342,7 @@ def content_key(item: Item) -> str:
         "mode": item.mode,
         "mesh": _file_hash(item.mesh),
         "target": _file_hash(item.target) if item.target else None,
+        "target_symmetry": _file_hash(item.target_symmetry) if item.target_symmetry else None,
         "params": dataclasses.asdict(item.params),
     }
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()

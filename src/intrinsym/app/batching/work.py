@@ -102,7 +102,12 @@ def _compute(item: Item, local: Callable[[str], str]) -> tuple[Result, dict[str,
     if item.target is None:
         result = pipeline.detect(local(item.mesh), item.params)
     else:
-        result = pipeline.match(local(item.mesh), local(item.target), item.params)
+        symmetry = (
+            None
+            if item.target_symmetry is None
+            else evaluate.load_symmetry_map(local(item.target_symmetry), allow_missing=True)
+        )
+        result = pipeline.match(local(item.mesh), local(item.target), item.params, target_symmetry=symmetry)
     info = dataclasses.replace(result.info, input=item.mesh, target_input=item.target)
     scores = None
     if item.symmetry_map is not None and item.target is None:
