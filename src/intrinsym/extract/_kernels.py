@@ -99,6 +99,12 @@ def grow(
     itself, the target ``self_target[n]``; -1 allows all. Returns the map's size.
     """
     cand = np.empty(norm.shape[1], dtype=np.int64)
+    support_of = np.empty(norm.shape[1], dtype=np.int64)
+    loose_of = np.empty(norm.shape[1], dtype=np.int64)
+    # one mapped neighbour's target row at a time, scattered: what fit's find looks up
+    # per candidate (a scan of the row) becomes one read
+    dense = np.full(norm.shape[1], np.inf)
+    cap = 2 * d_error
     queue = np.empty(len(image), dtype=np.int64)
     tail = 0
     for m in range(len(image)):  # np.flatnonzero compiles for 0.6 s on the first run
@@ -127,14 +133,30 @@ def grow(
                 cand[n_cand] = t_idx[k]
                 n_cand += 1
             best, best_support, best_value = -1, -1, threshold
+            if n_cand == 0:
+                continue
+            # fit's counts for every candidate at once, the neighbours' rows read once each
             mapped = 0
+            support_of[:n_cand] = 0
+            loose_of[:n_cand] = 0
             for f in range(g_ptr[n], g_ptr[n + 1]):
-                mapped += image[g_nbr[f]] >= 0
+                k = image[g_nbr[f]]
+                if k < 0:
+                    continue
+                mapped += 1
+                near_lo = t_ptr[k]
+                near_hi = right(t_dist, near_lo, t_ptr[k + 1], g_len[f] + cap)
+                for j in range(near_lo, near_hi):
+                    dense[t_idx[j]] = t_dist[j]
+                for c in range(n_cand):
+                    r = abs(dense[cand[c]] - g_len[f])
+                    support_of[c] += r < d_error
+                    loose_of[c] += r < cap
+                for j in range(near_lo, near_hi):
+                    dense[t_idx[j]] = np.inf
             for c in range(n_cand):
                 value = norm[n, cand[c]]
-                support, loose, _ = fit(
-                    image, n, cand[c], g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, 2 * d_error
-                )
+                support, loose = support_of[c], loose_of[c]
                 if support < min_support or 2 * loose < mapped:
                     continue
                 if support > best_support or (support == best_support and value >= best_value):
