@@ -27,6 +27,7 @@ import numpy as np
 from ..extract.extract import consistency, normalise_rows
 from ..extract.support import SourceGraph
 from ..extract.symmetry import Symmetry
+from ..globalmap.confidence import sample_images
 
 if TYPE_CHECKING:
     from .result import Result
@@ -109,21 +110,15 @@ def _quality(result: Result, image: np.ndarray, graph: SourceGraph) -> float:
     return float(unary[mapped, image[mapped]].sum() / len(image) * kept)
 
 
-def _sample_images(result: Result, vmap: np.ndarray) -> np.ndarray:
-    """(S,) int64: the target sample whose cell holds each source sample's image under
-    the vertex map ``vmap``, -1 where it has none."""
-    assert result.support is not None
-    image = vmap[result.source_point_vertex]
-    return np.where(image >= 0, result.support.vertex_target[np.maximum(image, 0)], -1).astype(np.int64)
-
-
 def _composed(result: Result, symmetry: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mode 0's map and the target's ``symmetry`` applied after it, as (2, N_a) vertex
     maps and (2, S) sample images."""
     first = result.symmetry_map()
     second = np.where(first >= 0, symmetry[np.maximum(first, 0)], -1).astype(np.int64)
     maps = np.stack([first, second])
-    return maps, np.stack([_sample_images(result, m) for m in maps])
+    assert result.support is not None
+    cells = result.support.vertex_target
+    return maps, np.stack([sample_images(m, result.source_point_vertex, cells) for m in maps])
 
 
 def two_modes(result: Result) -> Modes:
