@@ -128,36 +128,32 @@ def test_a_part_of_the_figure_maps_onto_its_place(figure_and_part) -> None:
     # measured at this size: 0.92 within 0.10, the indicator covering 0.98 of the part's area
     figure, used = figure_and_part
     a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
-    images = part_map.part_fmap_map(a, b, Params())
-    to_input = b.nearest_input_vertex(b.shape.vertices)[images[a.vertex_map]]
-    assert _right(figure, used, to_input) >= 0.85
+    assert _right(figure, used, part_map.part_fmap_map(a, b, Params())) >= 0.85
 
 
-def test_the_less_distorted_map_is_kept(figure_and_part, monkeypatch) -> None:
+def test_the_less_distorted_map_is_kept(figure_and_part) -> None:
     """choose_part_map keeps the extraction's map when it is the true one and the
     partial functional map's is random, and the other way round."""
     figure, used = figure_and_part
     a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
     rng = np.random.default_rng(0)
-    true_working = b.vertex_map[used[a.nearest_input_vertex(a.shape.vertices)]]
-    random_working = rng.integers(0, len(b.shape.vertices), len(a.shape.vertices))
-    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole, p: random_working)
-    image, stats = part_map.choose_part_map(used.copy(), a, b, Params())
+    random_map = rng.integers(0, len(figure.vertices), len(used))
+    image, stats = part_map.choose_part_map(used.copy(), a, b, random_map)
     assert image is None and stats.source == "extraction"
     assert stats.distortion["extraction"] < 0.05 < stats.distortion["partial_fmap"]
     # the share kept is the confidence's score: the true map near the table's top, a
     # random one at its floor, measured without a partial functional map too
     kept = {name: 1.0 - share for name, share in stats.distortion.items()}
     assert stats.kept == kept["extraction"] > 0.95 and kept["partial_fmap"] < 0.25
-    assert confidence.calibrated(np.array([kept["partial_fmap"]]), table=confidence.PART_CALIBRATION)[0] == 0.0
-    alone = part_map.choose_part_map(used.copy(), a, b, Params(), fmap=False)
+    table = confidence.PART_CALIBRATION
+    assert confidence.calibrated(np.array([kept["partial_fmap"]]), table=table)[0] == min(table)
+    alone = part_map.choose_part_map(used.copy(), a, b)
     assert alone == (None, part_map.PartMapStats("extraction", {"extraction": stats.distortion["extraction"]}))
-    monkeypatch.setattr(part_map, "part_fmap_map", lambda part, whole, p: true_working)
-    image, stats = part_map.choose_part_map(rng.integers(0, len(used), len(used)), a, b, Params())
+    image, stats = part_map.choose_part_map(rng.integers(0, len(used), len(used)), a, b, used.copy())
     assert stats.source == "partial_fmap" and image is not None
     assert np.array_equal(image, used)
     # an extraction that gives no image at all is replaced
-    image, stats = part_map.choose_part_map(np.full(len(used), -1), a, b, Params())
+    image, stats = part_map.choose_part_map(np.full(len(used), -1), a, b, used.copy())
     assert stats.source == "partial_fmap" and stats.distortion["extraction"] is None
     # a map that gives no image keeps none of the distances
-    assert part_map.choose_part_map(np.full(len(used), -1), a, b, Params(), fmap=False)[1].kept == 0.0
+    assert part_map.choose_part_map(np.full(len(used), -1), a, b)[1].kept == 0.0

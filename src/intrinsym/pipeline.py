@@ -28,7 +28,7 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .globalmap.part_map import choose_part_map
+from .globalmap.part_map import choose_part_map, part_fmap_map
 from .globalmap.vertex_maps import inverse_vertex_map
 from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
@@ -619,7 +619,7 @@ def match(
     if not part:
         return result
     if area_a < area_b:
-        result = _with_part_map(result, surf_a, surf_b, p)
+        result = _with_part_map(result, surf_a, surf_b, (sa, sb), p)
         clock.lap("part map")
         return dataclasses.replace(result, info=dataclasses.replace(result.info, seconds=dict(clock.seconds)))
     # The target is the part: every source sample takes a label, so the source vertices
@@ -628,7 +628,7 @@ def match(
     back_header = _match_header(sb, sa, preset, part)
     back = _solve(sampled(surf_b, surf_a, *sample_pair(surf_b, surf_a, p), p, False), p, _Clock(None), back_header)
     image = invert_part_match(back, sb, sa)
-    _, stats = choose_part_map(back.extraction_map(), surf_b, surf_a, p, fmap=False)
+    _, stats = choose_part_map(back.extraction_map(), surf_b, surf_a)
     clock.lap("reverse match")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True, part_map=stats)
     return dataclasses.replace(result, global_map=image, info=info)
@@ -653,12 +653,17 @@ def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarr
     return vmap.astype(np.int64)
 
 
-def _with_part_map(result: Result, part: Surface, whole: Surface, p: Params) -> Result:
+def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[Shape, Shape], p: Params) -> Result:
     """A part's match to its whole with the vertex map :func:`choose_part_map` keeps
     (``global_map`` the partial functional map's when it is kept; ``info.part_map``);
-    with ``p.part_fmap`` off or a point cloud, the extraction's map, measured."""
-    fmap = p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None
-    image, stats = choose_part_map(result.symmetry_map(), part, whole, p, fmap)
+    with ``p.part_fmap`` off or a point cloud, the extraction's map, measured. The
+    partial functional map is solved on the two meshes as given (``shapes``, the part
+    and the whole, prepared again without refinement when either was refined)."""
+    fmap_map = None
+    if p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None:
+        given = (part, whole) if not (part.subdivided or whole.subdivided) else prepare_pair(*shapes, 0, p.match_scale)
+        fmap_map = part_fmap_map(*given, p)
+    image, stats = choose_part_map(result.symmetry_map(), part, whole, fmap_map)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 
