@@ -574,7 +574,7 @@ def match(
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
-    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 5-14 s
+    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 4-9 s
     on the SHREC'16 shapes on a 2-core machine). The share of A's short distances the
     kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
