@@ -661,7 +661,7 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     and the whole, prepared again without refinement when either was refined)."""
     fmap_map = None
     if p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None:
-        given = (part, whole) if not (part.subdivided or whole.subdivided) else prepare_pair(*shapes, 0, p.match_scale)
+        given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
         fmap_map = part_fmap_map(*given, p)
     image, stats = choose_part_map(result.symmetry_map(), part, whole, fmap_map)
     info = dataclasses.replace(result.info, part_map=stats)

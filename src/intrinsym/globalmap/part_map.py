@@ -137,10 +137,10 @@ def part_fmap_map(part: Surface, whole: Surface, p: Params) -> np.ndarray:
     ----------
     part, whole : Surface
         Meshes (not point clouds), prepared in one unit (:func:`intrinsym.surface.prepare_pair`).
-        The map is solved on their working meshes: prepared without refinement
-        (``min_vertices`` 0) these are the meshes as given, whose spectra and spin images
-        the refinement BP's targets need adds nothing to (a 6,700-vertex SHREC'16 part
-        refined to 26,600 vertices took 8.3-9.9 s here, as given 5.5-5.7 s).
+        The map is solved on their working meshes. ``match`` passes them prepared without
+        refinement (``min_vertices`` 0), the meshes as given: the refinement serves BP's
+        dense targets, not the spectra or the spin images, and costs time here (a
+        6,700-vertex SHREC'16 part refined to 26,600 vertices: 8.3-9.9 s, as given 5.5-5.7 s).
     p : Params
         The spin images' parameters (:func:`part_descriptors`).
 
