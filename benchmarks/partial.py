@@ -183,7 +183,7 @@ def _cache_file(cache: Path, path: Path, method: str) -> Path:
 
 
 def _key(method: str, tag: str | None, overrides: Mapping) -> dict:
-    if method != "intrinsym":
+    if method in ("none", "pyfm"):  # the baselines: no code of ours, no tag
         return {"method": method, "cache_format": CACHE_FORMAT}
     return {
         "method": method,
@@ -272,12 +272,14 @@ def run_script(
     table: Callable[[dict[tuple[str, str], dict], list[str], list[str]], str],
     status: str,
     cache_folder: str | None = None,
+    optional: Mapping[str, str] | None = None,
 ) -> int:
     """The command line of a SHREC'16 script (this one's, ``shrec16_match.py``'s): the
     options, the cache, the runs (``runner`` per shape and method, pyFM's after
     ``methods`` unless ``--no-pyfm``), the progress lines (the row's ``status`` score)
     and the table; exit 1 when a run failed. ``cache_folder``: a subfolder of ``--cache``
-    for this script's files."""
+    for this script's files; ``optional``: further methods, each run when its flag
+    (``--NAME``, the value its help) is given."""
     script = Path(str(sys.modules[runner.__module__].__file__)).name
     parser = argparse.ArgumentParser(description=doc.splitlines()[0])
     add_data_argument(parser)
@@ -289,6 +291,8 @@ def run_script(
     parser.add_argument("--no-pyfm", action="store_true", help="leave out the pyFM baseline")
     parser.add_argument("--cached", action="store_true", help="compute nothing: the table of the cached shapes")
     parser.add_argument("-o", "--out", type=Path, help="also write the Markdown table here")
+    for name, text in (optional or {}).items():
+        parser.add_argument(f"--{name}", action="store_true", help=text)
     args = parser.parse_args(argv)
     if args.jobs < 1:
         parser.error("--jobs must be at least 1")
@@ -302,7 +306,7 @@ def run_script(
         return 0
     cache = args.cache / cache_folder if args.cache is not None and cache_folder else args.cache
     todo = select(shapes(data), args.shapes)
-    methods = methods + ([] if args.no_pyfm else ["pyfm"])
+    methods = methods + [name for name in optional or {} if getattr(args, name)] + ([] if args.no_pyfm else ["pyfm"])
     rows: dict[tuple[str, str], dict] = {}
     pending = []
     for path in todo:

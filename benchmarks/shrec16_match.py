@@ -30,10 +30,13 @@ within 0.10 of their image's answer point; under it, the null vertices farther t
 :data:`KEPT` (kept; the band between is not scored); the share of the cut-away ones left
 unmatched (-1), of the kept ones matched, and of the matched kept ones within 0.10 of the
 nearer answer; and the same shares at other reaches of the inversion (:data:`REACHES`,
-the margin of ``COVER_SPACINGS``), in a second table. Command::
+the margin of ``COVER_SPACINGS``), in a second table. With ``--reverse`` the script also
+times ``match(null, partial)`` itself (method "reverse": its seconds and stages, and the
+same reverse scores of the map it returns). Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/shrec16_match.py --data DATA [--cache DIR --tag TAG]
-        [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [-o TABLE.md]
+        [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [--reverse]
+        [-o TABLE.md]
 
 ``DATA`` holds ``shrec16_partial/`` (default ``$INTRINSYM_DATA``; skipped, exit 0, when
 absent). ``--shapes`` and ``--cache`` as in ``benchmarks/partial.py`` (one JSON file per
@@ -90,10 +93,10 @@ SCORES = (
     ("answers_010", "both answers ≤0.10", ("intrinsym",)),
     ("answers_005_alone", "both answers ≤0.05, no target symmetry", ("intrinsym",)),
     ("confidence0", "confidence mode 0", ("intrinsym",)),
-    ("cut_unmatched", "reverse: cut-away unmatched", ("intrinsym",)),
-    ("kept_matched", "reverse: kept matched", ("intrinsym",)),
-    ("reverse_within_010", "reverse: matched kept ≤0.10", ("intrinsym",)),
-    ("seconds", "seconds", ("intrinsym", "pyfm")),
+    ("cut_unmatched", "reverse: cut-away unmatched", ("intrinsym", "reverse")),
+    ("kept_matched", "reverse: kept matched", ("intrinsym", "reverse")),
+    ("reverse_within_010", "reverse: matched kept ≤0.10", ("intrinsym", "reverse")),
+    ("seconds", "seconds", ("intrinsym", "pyfm", "reverse")),
 )
 
 
@@ -208,7 +211,8 @@ def both_answers(two: modes.Modes, true: np.ndarray, mirror: np.ndarray, graph, 
 
 
 def run(path: Path, method: str, overrides: Mapping) -> dict:
-    """One shape matched to its null shape under ``method`` ("intrinsym" or "pyfm")."""
+    """One shape matched to its null shape under ``method`` ("intrinsym" or "pyfm"), or
+    its null shape matched to it ("reverse")."""
     shape = intrinsym.load(path)
     null = intrinsym.load(partial_truth.null_shape_path(path))
     n = len(shape.vertices)
@@ -221,6 +225,11 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     row: dict = {"shape": path.stem, "class": _group(path.stem)[1], "method": method, "vertices": n}
     start = time.perf_counter()
     result = None
+    if method == "reverse":
+        result = intrinsym.match(null, shape, intrinsym.make_params(**overrides))
+        row["seconds"] = time.perf_counter() - start
+        row["stages"] = dict(result.info.seconds)
+        return {**row, **reverse_scores(result.symmetry_map(), true, mirror, graph)}
     if method == "pyfm":
         vmap = pyfm_match(shape, null)
         row["seconds"] = time.perf_counter() - start
@@ -329,7 +338,16 @@ def reach_table(rows: dict[tuple[str, str], dict], names: list[str]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_script(argv, __doc__, ["intrinsym"], run, markdown, "within_010", cache_folder="match")
+    return run_script(
+        argv,
+        __doc__,
+        ["intrinsym"],
+        run,
+        markdown,
+        "within_010",
+        cache_folder="match",
+        optional={"reverse": "also time match(null, partial) itself and score the map it returns"},
+    )
 
 
 if __name__ == "__main__":

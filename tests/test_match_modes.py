@@ -95,7 +95,8 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
 
 def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, half_matched, tmp_path):
     """match(whole, part)'s vertex map is the part's own match to the whole inverted
-    (:func:`invert_part_match`), -1 off what it covers, and a loaded result keeps it. At
+    (:func:`invert_part_match`), -1 off what it covers, and a loaded result keeps it; its
+    own labels on the part lie as densely as the part's match's on the whole. At
     this size the part's own map is mostly wrong (0.23 of the half within 0.1 of its true
     image at seed 0), so what the inverse leaves unmatched is measured at 150 / 1500 on
     spot, in the slow test below; :func:`inverse_vertex_map` itself is tested on exact maps
@@ -103,6 +104,11 @@ def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and
     half, whole, _ = half_and_whole
     result = intrinsym.match(whole, half, intrinsym.make_params(**SMALL))
     assert result.info.part and result.info.target_part and "reverse match" in result.info.seconds
+    # the labels on the part lie as densely as on a whole: n_target times its share of the area
+    share = surface_area(half) / surface_area(whole)
+    assert share < 0.8 and abs(len(result.target_points) - SMALL["n_target"] * share) <= 1
+    spacing = result.info.resolved.target_spacing
+    assert spacing == pytest.approx(half_matched.info.resolved.target_spacing, rel=0.01)
     found = result.symmetry_map()
     assert np.array_equal(found, invert_part_match(half_matched, half, whole))
     assert (found == -1).any() and (found >= 0).any() and found.max() < len(half.vertices)

@@ -118,7 +118,8 @@ class Params:
     )
     n_target: int | None = _p(
         4000,
-        "number of target samples |Pt|; ignored when --target-spacing is set",
+        "number of target samples |Pt| (match: a part as the target gets its share of the whole's, by "
+        "area); ignored when --target-spacing is set",
         "sampling",
         paper="6000-12722 (Table 1)",
         flag="--target",

@@ -586,8 +586,10 @@ def match(
     (:func:`~intrinsym.globalmap.vertex_maps.inverse_vertex_map`): -1 ("no match") on
     the vertices of A that B's image does not cover (B's extraction's map, not the partial
     functional map: see :func:`invert_part_match`). The marginals, the extraction and the
-    modes stay those of A to B; the second solve costs about as much as the first
-    (``run.json``: ``target_part``, the stage ``reverse match``).
+    modes stay those of A to B, whose labels on B lie as densely as on a whole
+    (:func:`part_target_params`: ``n_target`` times B's share of A's area); the second
+    solve costs about as much as the first (``run.json``: ``target_part``, the stage
+    ``reverse match``).
 
     ``target_symmetry`` is B's own symmetry map, (N_b,) int (-1 where none) or a
     ``detect`` result of B: the result keeps it, and its second answer
@@ -612,9 +614,12 @@ def match(
     if part:
         p = dataclasses.replace(p, unary=p.partial_unary)
     clock.lap("prepare")
-    ps, pt = sample_pair(surf_a, surf_b, p)
+    target_part = part and area_b < area_a
+    p_ab = part_target_params(p, area_b / area_a) if target_part else p
+    ps, pt = sample_pair(surf_a, surf_b, p_ab)
     clock.lap("sampling")
-    result = _solve(sampled(surf_a, surf_b, ps, pt, p, False), p, clock, _match_header(sa, sb, preset, part))
+    problem = sampled(surf_a, surf_b, ps, pt, p_ab, False, area_b if target_part else 1.0)
+    result = _solve(problem, p_ab, clock, _match_header(sa, sb, preset, part))
     result = dataclasses.replace(result, target_symmetry=symmetry)
     if not part:
         return result
@@ -632,6 +637,22 @@ def match(
     clock.lap("reverse match")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True, part_map=stats)
     return dataclasses.replace(result, global_map=image, info=info)
+
+
+def part_target_params(p: Params, share: float) -> Params:
+    """The parameters of a match whose target is a part with ``share`` of the source's
+    area: ``n_target`` scaled by that share, so that the part's labels lie as densely as
+    on a whole (``target_spacing``, when given, already fixes the density).
+
+    The pairwise term compares a source edge with the target pairs within the edge's
+    length plus its truncation, and the source samples lie as far apart as on a whole:
+    with all ``n_target`` labels on a part, each target had several times the
+    neighbours, a BP iteration cost 2-30 times as much, and BP on cuts_dog_shape_1 took
+    108 s against 12 s (side by side; docs/results.md).
+    """
+    if p.target_spacing is not None or p.n_target is None:
+        return p
+    return dataclasses.replace(p, n_target=max(1, round(p.n_target * share)))
 
 
 def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarray:

@@ -39,7 +39,7 @@ class Problem:
         Their geodesic lengths (normalised units).
     t_spacing : float
         Target sample spacing (normalised units): ``target_spacing`` or the spacing of
-        ``len(pt)`` samples on unit area.
+        ``len(pt)`` samples on the target's area (unit area but for a part).
     self_match : bool
         The shape matched to itself (:func:`intrinsym.detect`).
     """
@@ -83,8 +83,17 @@ def source_graph(src: Surface, ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return edges, geodesics.pair_distances(src.graph, ps[edges])
 
 
-def sampled(src: Surface, tgt: Surface, ps: np.ndarray, pt: np.ndarray, p: Params, self_match: bool) -> Problem:
-    """The :class:`Problem` of samples ``ps`` on ``src`` and ``pt`` on ``tgt`` under ``p``."""
-    t_spacing = p.target_spacing or sampling.spacing_for_count(1.0, len(pt))
+def sampled(
+    src: Surface,
+    tgt: Surface,
+    ps: np.ndarray,
+    pt: np.ndarray,
+    p: Params,
+    self_match: bool,
+    target_area: float = 1.0,
+) -> Problem:
+    """The :class:`Problem` of samples ``ps`` on ``src`` and ``pt`` on ``tgt`` under ``p``;
+    ``target_area``: the target's area in the normalised unit (below 1 for a part)."""
+    t_spacing = p.target_spacing or sampling.spacing_for_count(target_area, len(pt))
     edges, edge_length = source_graph(src, ps)
     return Problem(src, tgt, ps, pt, edges, edge_length, t_spacing, self_match)
