@@ -1,6 +1,7 @@
 """The command line: outputs, exit codes and one-line errors."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ import trimesh
 import intrinsym
 from conftest import CLI_SMALL as SMALL
 from conftest import cli_run
-from intrinsym import params
+from intrinsym import params, pipeline
 from intrinsym.app import cli
 
 
@@ -184,6 +185,18 @@ def test_detect_report_identity(tmp_path):
     gap = np.linalg.norm(spot.vertices[pairs[:, 0]] - spot.vertices[pairs[:, 1]], axis=1)
     assert np.median(gap) < 0.05 * np.sqrt(intrinsym.mesh.shape.surface_area(spot))
     assert json.loads((out / "run.json").read_text())["params"]["report_identity"] is True
-    # without the flag the same model lists no identity
-    assert cli.main(["detect", "--example", "-o", str(out), "-q", *sizes, "--keep-trivial"]) == 0
-    assert all(sym["kind"] != "identity" for sym in json.loads((out / "symmetries.json").read_text()))
+    # without the flag (its default) the same model lists no identity: the flag acts in the
+    # extraction alone (Params.extraction's keep_identity), which runs again on the saved model
+    args = cli.build_parser().parse_args(["detect", "--example", "-o", str(out), *sizes, "--keep-trivial"])
+    assert cli._params(args).report_identity is False
+    saved = intrinsym.Result.load(out)
+    kinds = {
+        flag: [
+            s.kind
+            for s in pipeline.extract_result(
+                replace(saved, params=replace(saved.params, report_identity=flag))
+            ).symmetries
+        ]
+        for flag in (True, False)
+    }
+    assert kinds[True].count("identity") == 1 and "identity" not in kinds[False], kinds

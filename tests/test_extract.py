@@ -192,7 +192,7 @@ def test_grow_rejects_an_image_that_most_mapped_neighbours_contradict():
     edges = np.array([[i, (i + k) % S] for i in range(S) for k in (1, 2)])
     edges.sort(axis=1)
     graph = SourceGraph.from_edges(edges, np.tile([0.1, 0.2], S), S)
-    m = np.full((S, T), 0.01)
+    m = np.full((S, T), 0.01, dtype=np.float32)  # grow's float32 rows (as normalise_rows gives them)
     m[np.arange(S), IDENTITY] = 1.0
     m[5, IDENTITY[5]], m[5, 12] = 0.01, 1.0
     image = grow(m, graph, TARGETS, 0, 0, ExtractParams(d_error=0.01))

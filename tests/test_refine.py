@@ -215,7 +215,9 @@ def test_nearest_sources_against_a_dense_sort():
     rng = np.random.default_rng(0)
     n_sources, n_vertices, k = 30, 50, 4
     dense = np.where(rng.random((n_sources, n_vertices)) < 0.3, rng.random((n_sources, n_vertices)), np.inf)
-    rows, cols = np.nonzero(np.isfinite(dense))
+    # contiguous, as the refinement passes them: np.nonzero's columns of one array would
+    # compile the kernel a second time, for strided arrays
+    rows, cols = (np.ascontiguousarray(a) for a in np.nonzero(np.isfinite(dense)))
     queries = np.array([0, 7, 7, 49, 3])
     ptr, source, distance = _nearest_sources(rows, cols, dense[rows, cols], n_vertices, queries, k)
     for q, v in enumerate(queries):

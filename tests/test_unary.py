@@ -56,6 +56,9 @@ def mirror_results():
     from conftest import mirror_shape
 
     v, f, sym = mirror_shape()
+    # the three detects share one prepared surface, its eigenpairs solved once (a detect on
+    # a prepared surface is the detect on the mesh: tests/test_pipeline.py)
+    surface = intrinsym.prepare(Shape(v, f), intrinsym.make_params(**SMALL))
     # one width per term (the per-sample widths of "local" are tested on the
     # cuboctahedron below; here they widen WKS alone to breadth 0.029), and the identity
     # removed: at this size "auto" keeps it for WKS alone (its argmax keeps 0.83 of the
@@ -63,12 +66,12 @@ def mirror_results():
     # identity's band to the unary under test
     out = {
         name: intrinsym.detect(
-            Shape(v, f),
+            surface,
             intrinsym.make_params(unary=name, calibration="both", trivial_weight=0.0, **SMALL, **UNARY_ONLY),
         )
         for name in ("wks", "wks*spin")
     }
-    out["paper"] = intrinsym.detect(Shape(v, f), intrinsym.make_params("paper", **SMALL))
+    out["paper"] = intrinsym.detect(surface, intrinsym.make_params("paper", **SMALL))
     return Shape(v, f), sym, out
 
 
@@ -159,9 +162,11 @@ def test_offset_calibration_keeps_every_image_of_a_five_fold_star(mode):
     # "descriptor" rule measures no spread; "offset" measures it on true matches at the
     # sampling offset, and the true images keep their potential.
     star = shapes.star(5)
-    shape = Shape(star.vertices, star.faces)
-    run = intrinsym.detect if mode == "detect" else lambda s, p: intrinsym.match(s, s, p)
     sizes = dict(SMALL, iterations=1, **UNARY_ONLY)
+    shape = Shape(star.vertices, star.faces)
+    if mode == "detect":  # both calibrations on one prepared surface: its eigenpairs solved once
+        shape = intrinsym.prepare(shape, intrinsym.make_params(eigenpairs=30, **sizes))
+    run = intrinsym.detect if mode == "detect" else lambda s, p: intrinsym.match(s, s, p)
     kept = {
         c: _images_kept(run(shape, intrinsym.make_params(calibration=c, eigenpairs=30, **sizes)), star)
         for c in ("both", "descriptor")
@@ -180,17 +185,10 @@ def test_local_calibration_keeps_every_other_vertex_of_the_cuboctahedron():
     graph = geodesics.surface_graph(v / np.sqrt(surface_area(Shape(v, cubo.faces))), cubo.faces)
     to_corner = geodesics.distances_from(graph, corners)
     kept = {}
+    sizes = dict(n_source=60, n_target=600, iterations=1, eigenpairs=40, spin_cloud=10000, **UNARY_ONLY)
+    surface = intrinsym.prepare(Shape(v, cubo.faces), intrinsym.make_params(**sizes))  # eigenpairs solved once
     for calibration in ("both", "local"):
-        params = intrinsym.make_params(
-            n_source=60,
-            n_target=600,
-            calibration=calibration,
-            iterations=1,
-            eigenpairs=40,
-            spin_cloud=10000,
-            **UNARY_ONLY,
-        )
-        r = intrinsym.detect(Shape(v, cubo.faces), params)
+        r = intrinsym.detect(surface, intrinsym.make_params(calibration=calibration, **sizes))
         row = r.unary / r.unary.max(axis=1, keepdims=True)
         samples = np.argmin(to_corner[:, r.source_point_vertex], axis=1)
         kept[calibration] = np.mean(
