@@ -623,7 +623,7 @@ def match(
     result = dataclasses.replace(result, target_symmetry=symmetry)
     if not part:
         return result
-    if area_a < area_b:
+    if not target_part:
         result = _with_part_map(result, surf_a, surf_b, (sa, sb), p)
         clock.lap("part map")
         return dataclasses.replace(result, info=dataclasses.replace(result.info, seconds=dict(clock.seconds)))
