@@ -9,7 +9,7 @@ import trimesh
 
 import intrinsym
 from conftest import CLI_SMALL as SMALL
-from conftest import cli_run
+from conftest import cli_run, mirror_shape
 from intrinsym import params, pipeline
 from intrinsym.app import cli
 
@@ -27,8 +27,12 @@ def test_detect_example_writes_result(example_detected):
 
 
 def test_detect_trivial_weight(tmp_path, capsys):
-    out = tmp_path / "spot"
-    assert cli.main(["detect", "--example", "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
+    # the flag's way from the command line to the run, on the coarsest generated star (182
+    # vertices, 722 working): two detects of spot took 3-4 s of this test, these 1-2 s
+    star = tmp_path / "star.off"
+    assert cli.main(["generate", "star", "--resolution", "2", "-o", str(star)]) == 0
+    out = tmp_path / "star"
+    assert cli.main(["detect", str(star), "-o", str(out), "-q", *SMALL, "--trivial-weight", "0.5"]) == 0
     run_json = json.loads((out / "run.json").read_text())
     assert run_json["params"]["trivial_weight"] == 0.5 and run_json["identity"] == {"weight": 0.5}
     # auto: thresholds no BP argmax reaches keep the identity at the fallback weight
@@ -36,7 +40,7 @@ def test_detect_trivial_weight(tmp_path, capsys):
         cli.main(
             [
                 "detect",
-                "--example",
+                str(star),
                 "-o",
                 str(out),
                 "-q",
@@ -85,8 +89,8 @@ def test_match_takes_the_targets_symmetry(tmp_path, capsys, example_detected):
     assert not (tmp_path / "bad").exists()
 
 
-def test_evaluate_command(tmp_path, mirror, capsys):
-    v, f, sym = mirror
+def test_evaluate_command(tmp_path, capsys):
+    v, f, sym = mirror_shape(subdivisions=3)  # 642 vertices, not subdivided: the detect 2-3x cheaper than on 2,562
     mesh_path = tmp_path / "m.off"
     with open(mesh_path, "w") as fh:
         fh.write(f"OFF\n{len(v)} {len(f)} 0\n")
