@@ -28,7 +28,7 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .globalmap.part_map import choose_part_map, part_fmap_map
+from .globalmap.part_map import choose_part_map, part_fmap_map, refine_part_map, refined_if_less_distorted
 from .globalmap.vertex_maps import inverse_vertex_map
 from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
@@ -574,8 +574,10 @@ def match(
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
-    A's geodesic distances (``run.json``: ``part_map``; the stage ``part map``, 4-9 s
-    on the SHREC'16 shapes on a 2-core machine). The share of A's short distances the
+    A's geodesic distances, the extraction's refined by ZoomOut where that keeps more of
+    them (:func:`~intrinsym.globalmap.part_map.refine_part_map`; ``run.json``:
+    ``part_map``; the stage ``part map``, 4-9 s on the SHREC'16 shapes on a 2-core
+    machine). The share of A's short distances the
     kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
 
@@ -676,15 +678,20 @@ def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarr
 
 def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[Shape, Shape], p: Params) -> Result:
     """A part's match to its whole with the vertex map :func:`choose_part_map` keeps
-    (``global_map`` the partial functional map's when it is kept; ``info.part_map``);
-    with ``p.part_fmap`` off or a point cloud, the extraction's map, measured. The
-    partial functional map is solved on the two meshes as given (``shapes``, the part
-    and the whole, prepared again without refinement when either was refined)."""
-    fmap_map = None
-    if p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None:
-        given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
-        fmap_map = part_fmap_map(*given, p)
-    image, stats = choose_part_map(result.symmetry_map(), part, whole, fmap_map)
+    (``global_map``: the partial functional map's, or the extraction's refined by
+    :func:`refine_part_map` where that changes fewer of the part's distances:
+    :func:`refined_if_less_distorted`; ``info.part_map``); with ``p.part_fmap`` off or
+    a point cloud, the extraction's map as it is, measured. The partial functional map and the
+    refinement are solved on the two meshes as given (``shapes``, the part and the whole,
+    prepared again without refinement when either was refined)."""
+    if not (p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None):
+        _, stats = choose_part_map(result.symmetry_map(), part, whole)
+        return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
+    given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
+    image, stats = choose_part_map(result.symmetry_map(), part, whole, part_fmap_map(*given, p))
+    if image is None:
+        refined = refine_part_map(result.symmetry_map(), *given)
+        image, stats = refined_if_less_distorted(refined, part, whole, stats)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

@@ -37,7 +37,7 @@ from threadpoolctl import threadpool_limits
 
 from ..spectral.neighbours import nearest_rows
 
-__all__ = ["PartialMap", "gradient_operator", "partial_functional_map"]
+__all__ = ["PartialMap", "gradient_operator", "partial_functional_map", "restricted_zoomout"]
 
 #: Eigenpairs each shape brings (the constant one included).
 EIGENPAIRS = 121
@@ -254,7 +254,7 @@ def _v_step(
     return minimize(energy, v0, jac=True, method="L-BFGS-B", options={"maxiter": V_ITERATIONS}).x
 
 
-def _restricted_zoomout(
+def restricted_zoomout(
     images: np.ndarray,
     part: tuple[np.ndarray, np.ndarray],
     whole: tuple[np.ndarray, np.ndarray],
@@ -262,7 +262,22 @@ def _restricted_zoomout(
 ) -> np.ndarray:
     """ZoomOut from the whole's ``BASIS`` to ``ZOOMOUT_BASIS`` functions, the part's basis
     following the slope, images only among the whole's vertices ``keep``. The map is the
-    pull-back fitted on a fixed subsample of the part."""
+    pull-back fitted on a fixed subsample of the part.
+
+    Parameters
+    ----------
+    images : (N_part,) int
+        The whole's vertex of every vertex of the part: the map to refine.
+    part, whole : tuple (evals, evecs)
+        Ascending Laplace-Beltrami eigenvalues (K,) and M-orthonormal eigenfunctions
+        (N, K) of each; the whole's K >= ``ZOOMOUT_BASIS``.
+    keep : (N_whole,) bool
+        The whole's vertices the images may take.
+
+    Returns
+    -------
+    (N_part,) int64
+    """
     evals_p, phi = part
     evals_w, psi = whole
     rng = np.random.default_rng(0)
@@ -344,5 +359,5 @@ def _partial_functional_map(
         keep = np.ones(len(eta), dtype=bool)
     candidates = np.flatnonzero(keep)
     images = candidates[nearest_rows(phi, psi[candidates] @ c)]
-    images = _restricted_zoomout(images, (evals_p, evecs_p), (evals_w, evecs_w), keep)
+    images = restricted_zoomout(images, (evals_p, evecs_p), (evals_w, evecs_w), keep)
     return PartialMap(images.astype(np.int64), eta, c)
