@@ -174,7 +174,7 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     (:func:`~intrinsym.globalmap.partial_fmap.restricted_zoomout`, images within
     ``REFINE_REACH`` of the map's own) gives the precision, as it does for ``detect``'s
     global map. Vertices of the part without an image take that of the nearest one with
-    an image (graph distance) as the seed.
+    an image (in space: a piece of the part with none has no path to one) as the seed.
 
     Parameters
     ----------
@@ -186,8 +186,8 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     Returns
     -------
     (N_part_input,) int64
-        The refined map: an image for every vertex connected (on the part) to one with
-        an image, -1 for the others; ``vertex_map`` itself when it gives none.
+        The refined map, an image for every vertex; ``vertex_map`` itself when it gives
+        none.
     """
     if part.shape.faces is None or whole.shape.faces is None:
         raise ValueError("refining a part's map needs two meshes, not point clouds")
@@ -195,20 +195,16 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     mapped = image >= 0
     if not mapped.any():
         return np.asarray(vertex_map, dtype=np.int64)
-    seed = np.where(mapped, whole.vertex_map[np.maximum(image, 0)], -1)
-    if not mapped.all():
-        _, _, nearest = dijkstra(part.graph, indices=np.flatnonzero(mapped), min_only=True, return_predecessors=True)
-        seed = np.where(mapped | (nearest < 0), seed, seed[np.maximum(nearest, 0)])
-    seeded = seed >= 0
-    keep = np.isfinite(dijkstra(whole.graph, indices=np.unique(seed[seeded]), min_only=True, limit=REFINE_REACH))
+    with_image = np.flatnonzero(mapped)
+    nearest = with_image[cKDTree(part.shape.vertices[with_image]).query(part.shape.vertices)[1]]
+    seed = whole.vertex_map[image[nearest]]
+    keep = np.isfinite(dijkstra(whole.graph, indices=np.unique(seed), min_only=True, limit=REFINE_REACH))
     evals_p, evecs_p, _ = _spectrum(part)
     evals_w, evecs_w, _ = _spectrum(whole)
     # as in partial_functional_map: OpenBLAS's threads slow these (N, 100) products down
     with threadpool_limits(1, user_api="blas"):
-        refined = restricted_zoomout(np.maximum(seed, 0), (evals_p, evecs_p), (evals_w, evecs_w), keep)
-    refined = np.where(seeded, refined, -1)
-    images = np.where(refined >= 0, _working_inputs(whole)[np.maximum(refined, 0)], -1)
-    return images[part.vertex_map]
+        refined = restricted_zoomout(seed, (evals_p, evecs_p), (evals_w, evecs_w), keep)
+    return _working_inputs(whole)[refined[part.vertex_map]]
 
 
 def refined_if_less_distorted(
