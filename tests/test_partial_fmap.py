@@ -186,10 +186,11 @@ def test_refining_a_cell_map_gives_the_vertices_their_own_images(figure_and_part
     # the refinement changes fewer of the part's distances than the cell map: it is kept,
     # and its share is the confidence's score; a random "refinement" is not
     _, stats = part_map.choose_part_map(coarse, a, b)
-    image, kept = part_map.refined_if_less_distorted(refined, a, b, stats)
-    assert kept.source == "refined" and np.array_equal(image, refined)
+    better, kept = part_map.refined_if_less_distorted(refined, a, b, stats)
+    assert better and kept.refined and kept.source == "extraction"
     assert kept.distortion["refined"] < kept.distortion["extraction"] and kept.kept == 1.0 - kept.distortion["refined"]
-    image, kept = part_map.refined_if_less_distorted(rng.integers(0, len(figure.vertices), len(used)), a, b, stats)
-    assert image is None and kept.source == "extraction" and kept.distortion["refined"] > kept.distortion["extraction"]
+    better, kept = part_map.refined_if_less_distorted(rng.integers(0, len(figure.vertices), len(used)), a, b, stats)
+    assert not better and not kept.refined and kept.distortion["refined"] > kept.distortion["extraction"]
+    assert kept.kept == 1.0 - kept.distortion["extraction"]
     none = np.full(len(used), -1)
     assert np.array_equal(part_map.refine_part_map(none, a, b), none)

@@ -574,8 +574,8 @@ def match(
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
-    A's geodesic distances, the extraction's refined by ZoomOut where that keeps more of
-    them (:func:`~intrinsym.globalmap.part_map.refine_part_map`; ``run.json``:
+    A's geodesic distances, refined by ZoomOut where that keeps more of them
+    (:func:`~intrinsym.globalmap.part_map.refine_part_map`; ``run.json``:
     ``part_map``; the stage ``part map``, 4-9 s on the SHREC'16 shapes on a 2-core
     machine). The share of A's short distances the
     kept map keeps is the score of its confidence
@@ -678,9 +678,9 @@ def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarr
 
 def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[Shape, Shape], p: Params) -> Result:
     """A part's match to its whole with the vertex map :func:`choose_part_map` keeps
-    (``global_map``: the partial functional map's, or the extraction's refined by
-    :func:`refine_part_map` where that changes fewer of the part's distances:
-    :func:`refined_if_less_distorted`; ``info.part_map``); with ``p.part_fmap`` off or
+    (``global_map``: the partial functional map's or the extraction's, refined by
+    :func:`refine_part_map` where that changes fewer of the part's distances
+    (:func:`refined_if_less_distorted`); ``info.part_map``); with ``p.part_fmap`` off or
     a point cloud, the extraction's map as it is, measured. The partial functional map and the
     refinement are solved on the two meshes as given (``shapes``, the part and the whole,
     prepared again without refinement when either was refined)."""
@@ -689,9 +689,10 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
     given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
     image, stats = choose_part_map(result.symmetry_map(), part, whole, part_fmap_map(*given, p))
-    if image is None:
-        refined = refine_part_map(result.symmetry_map(), *given)
-        image, stats = refined_if_less_distorted(refined, part, whole, stats)
+    refined = refine_part_map(result.symmetry_map() if image is None else image, *given)
+    better, stats = refined_if_less_distorted(refined, part, whole, stats)
+    if better:
+        image = refined
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

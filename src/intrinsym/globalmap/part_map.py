@@ -46,7 +46,7 @@ PART_MAP_RADIUS = 0.25
 #: On the 125 SHREC'16 pairs the share of changed pairs ranks the right maps (within
 #: 0.10 on >= 0.80 of the vertices) above the wrong ones (< 0.50) with an AUC of 0.999.
 PART_MAP_CHANGE = 0.05
-#: The refined extraction's map (:func:`refine_part_map`) keeps its images within this
+#: A refined part's map (:func:`refine_part_map`) keeps its images within this
 #: geodesic distance (sqrt(area) of the whole) of the extraction's; set once, not tuned.
 REFINE_REACH = 0.15
 #: The partial functional map's descriptors are spin images at this many area-uniform
@@ -63,26 +63,29 @@ class PartMapStats:
 
     Attributes
     ----------
-    source : {"extraction", "partial_fmap", "refined"}
-        The vertex map kept: the extraction's, the partial functional map's
-        (:func:`intrinsym.globalmap.partial_fmap.partial_functional_map`), or the
-        extraction's refined (:func:`refine_part_map`, :func:`refined_if_less_distorted`).
+    source : {"extraction", "partial_fmap"}
+        The vertex map kept: the extraction's, or the partial functional map's
+        (:func:`intrinsym.globalmap.partial_fmap.partial_functional_map`).
     distortion : dict of str to float
         Per candidate, the share of the part's vertex pairs within ``PART_MAP_RADIUS``
         whose geodesic distance the map changes by more than ``PART_MAP_CHANGE`` (None
         for a map that gives no image); the lower one is kept. Without a partial
-        functional map (``part_fmap`` off, a point cloud) the extraction's alone; "refined"
-        where the extraction's was kept and its refinement measured.
+        functional map (``part_fmap`` off, a point cloud) the extraction's alone;
+        "refined": the kept map's refinement, when measured.
+    refined : bool
+        The kept map was replaced by its refinement (:func:`refine_part_map`,
+        :func:`refined_if_less_distorted`).
     """
 
     source: str
     distortion: dict[str, float | None] = field(default_factory=dict)
+    refined: bool = False
 
     @property
     def kept(self) -> float:
         """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance
         the kept map keeps within ``PART_MAP_CHANGE`` (0 for a map that gives no image)."""
-        share = self.distortion.get(self.source)
+        share = self.distortion.get("refined" if self.refined else self.source)
         return 0.0 if share is None else 1.0 - share
 
 
@@ -170,7 +173,8 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     """A part's map into its whole refined by ZoomOut restricted to where the map lies.
 
     The extraction's map comes from BP's sample cells, so its images are as coarse as
-    the target samples; where it is the right map, ZoomOut seeded with it
+    the target samples, and the partial functional map's ZoomOut reaches anywhere in its
+    indicator; where the map is right, ZoomOut seeded with it
     (:func:`~intrinsym.globalmap.partial_fmap.restricted_zoomout`, images within
     ``REFINE_REACH`` of the map's own) gives the precision, as it does for ``detect``'s
     global map. Vertices of the part without an image take that of the nearest one with
@@ -209,38 +213,37 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
 
 def refined_if_less_distorted(
     refined_map: np.ndarray, part: Surface, whole: Surface, stats: PartMapStats
-) -> tuple[np.ndarray | None, PartMapStats]:
-    """The refined extraction's map (:func:`refine_part_map`) where it changes fewer of
-    the part's geodesic distances than the extraction's map it refines.
+) -> tuple[bool, PartMapStats]:
+    """Whether the refinement (:func:`refine_part_map`) of the map :func:`choose_part_map`
+    kept changes fewer of the part's geodesic distances than that map.
 
     The test :func:`choose_part_map` makes, between the map and its refinement only:
     ZoomOut gives a right map the precision of the whole's vertices, but it can also carry
-    a half-right map further off, and then tears more of the part's distances. (Against
-    the partial functional map the refined map is not weighed: refined, a wrong map
-    settles on a small region and changes fewer distances than a right one.)
+    a half-right map further off, and then tears more of the part's distances. The
+    choice between the extraction's map and the partial functional map weighs them
+    unrefined: refined, a wrong map settles on a small region and changes fewer
+    distances than a right one.
 
     Parameters
     ----------
     refined_map : (N_part_input,) int
-        The refinement of the extraction's map.
+        The refinement of the kept map.
     part, whole : Surface
         As in :func:`choose_part_map`.
     stats : PartMapStats
-        :func:`choose_part_map`'s, which kept the extraction's map.
+        :func:`choose_part_map`'s.
 
     Returns
     -------
-    vertex_map : (N_part_input,) int64 or None
-        The refined map; None when the extraction's stays.
+    refined : bool
+        The refinement is kept.
     stats : PartMapStats
-        ``stats`` with the refinement's share in ``distortion``; ``source`` "refined"
-        when it is kept.
+        ``stats`` with the refinement's share in ``distortion`` and ``refined`` set.
     """
-    share, kept = _changed(refined_map, part, whole), stats.distortion.get("extraction")
+    share, kept = _changed(refined_map, part, whole), stats.distortion.get(stats.source)
     distortion = {**stats.distortion, "refined": float(share) if np.isfinite(share) else None}
-    if np.isfinite(share) and (kept is None or share < kept):
-        return np.asarray(refined_map, dtype=np.int64), PartMapStats("refined", distortion)
-    return None, PartMapStats(stats.source, distortion)
+    better = bool(np.isfinite(share) and (kept is None or share < kept))
+    return better, PartMapStats(stats.source, distortion, better)
 
 
 def _changed(input_map: np.ndarray, part: Surface, whole: Surface) -> float:
