@@ -688,8 +688,9 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
         _, stats = choose_part_map(result.symmetry_map(), part, whole)
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
     given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
-    image, stats = choose_part_map(result.symmetry_map(), part, whole, part_fmap_map(*given, p))
-    refined = refine_part_map(result.symmetry_map() if image is None else image, *given)
+    extraction_map = result.symmetry_map()
+    image, stats = choose_part_map(extraction_map, part, whole, part_fmap_map(*given, p))
+    refined = refine_part_map(extraction_map if image is None else image, *given)
     better, stats = refined_if_less_distorted(refined, part, whole, stats)
     if better:
         image = refined

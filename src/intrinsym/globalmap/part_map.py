@@ -47,7 +47,7 @@ PART_MAP_RADIUS = 0.25
 #: 0.10 on >= 0.80 of the vertices) above the wrong ones (< 0.50) with an AUC of 0.999.
 PART_MAP_CHANGE = 0.05
 #: A refined part's map (:func:`refine_part_map`) keeps its images within this
-#: geodesic distance (sqrt(area) of the whole) of the extraction's; set once, not tuned.
+#: geodesic distance (sqrt(area) of the whole) of the map's own; set once, not tuned.
 REFINE_REACH = 0.15
 #: The partial functional map's descriptors are spin images at this many area-uniform
 #: points of each shape (every vertex taking its nearest point's)...
@@ -92,9 +92,14 @@ class PartMapStats:
 def _spectrum(surface: Surface) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eigenvalues, eigenfunctions and lumped vertex areas of a surface's working mesh."""
     shape = surface.shape
-    evals, evecs = surface.eigenpairs(min(EIGENPAIRS, len(shape.vertices) - 1), 0)
+    evals, evecs = _eigenpairs(surface)
     _, mass = laplacian.laplace_beltrami(shape.vertices, shape.faces)
     return evals, evecs, np.asarray(mass.diagonal()).ravel()
+
+
+def _eigenpairs(surface: Surface) -> tuple[np.ndarray, np.ndarray]:
+    """The working mesh's eigenvalues and eigenfunctions (the surface keeps them)."""
+    return surface.eigenpairs(min(EIGENPAIRS, len(surface.shape.vertices) - 1), 0)
 
 
 def spin_functions(surface: Surface, p: Params) -> np.ndarray:
@@ -203,11 +208,9 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     nearest = with_image[cKDTree(part.shape.vertices[with_image]).query(part.shape.vertices)[1]]
     seed = whole.vertex_map[image[nearest]]
     keep = np.isfinite(dijkstra(whole.graph, indices=np.unique(seed), min_only=True, limit=REFINE_REACH))
-    evals_p, evecs_p, _ = _spectrum(part)
-    evals_w, evecs_w, _ = _spectrum(whole)
     # as in partial_functional_map: OpenBLAS's threads slow these (N, 100) products down
     with threadpool_limits(1, user_api="blas"):
-        refined = restricted_zoomout(seed, (evals_p, evecs_p), (evals_w, evecs_w), keep)
+        refined = restricted_zoomout(seed, _eigenpairs(part), _eigenpairs(whole), keep)
     return _working_inputs(whole)[refined[part.vertex_map]]
 
 
@@ -240,16 +243,17 @@ def refined_if_less_distorted(
     stats : PartMapStats
         ``stats`` with the refinement's share in ``distortion`` and ``refined`` set.
     """
-    share, kept = _changed(refined_map, part, whole), stats.distortion.get(stats.source)
+    share, kept = _changed(refined_map, _working_inputs(part), part, whole), stats.distortion.get(stats.source)
     distortion = {**stats.distortion, "refined": float(share) if np.isfinite(share) else None}
     better = bool(np.isfinite(share) and (kept is None or share < kept))
     return better, PartMapStats(stats.source, distortion, better)
 
 
-def _changed(input_map: np.ndarray, part: Surface, whole: Surface) -> float:
+def _changed(input_map: np.ndarray, from_inputs: np.ndarray, part: Surface, whole: Surface) -> float:
     """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance a
-    map of input vertices changes by more than ``PART_MAP_CHANGE`` (NaN: no image)."""
-    image = np.asarray(input_map, dtype=np.int64)[_working_inputs(part)]
+    map of input vertices changes by more than ``PART_MAP_CHANGE`` (NaN: no image);
+    ``from_inputs`` is ``_working_inputs(part)``."""
+    image = np.asarray(input_map, dtype=np.int64)[from_inputs]
     working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
     return float(graph_map_distortion(working, part.graph, whole.graph, PART_MAP_RADIUS).above(PART_MAP_CHANGE))
 
@@ -284,7 +288,8 @@ def choose_part_map(
     maps = {"extraction": extraction_map}
     if fmap_map is not None:
         maps["partial_fmap"] = fmap_map
-    shares = {name: _changed(input_map, part, whole) for name, input_map in maps.items()}
+    from_inputs = _working_inputs(part)
+    shares = {name: _changed(input_map, from_inputs, part, whole) for name, input_map in maps.items()}
     distortion = {name: (float(s) if np.isfinite(s) else None) for name, s in shares.items()}
     if fmap_map is None:
         return None, PartMapStats("extraction", distortion)
