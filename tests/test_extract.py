@@ -12,7 +12,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from intrinsym.extract import _kernels
 from intrinsym.extract.extract import (
+    MERGE_AGREEMENT,
     _merge,
     complete,
     consistency,
@@ -308,6 +310,27 @@ def test_merge_joins_agreeing_maps_only():
         [np.where(np.arange(S) <= 5, MIRROR, -1), np.where(np.arange(S) >= 6, MIRROR, -1)], GRAPH, TARGETS, p
     )
     assert [g.tolist() for g in groups] == [MIRROR.tolist()]
+
+
+def test_agreement_that_stops_early_decides_as_the_full_count():
+    """Against the full count (share 0): the early stop of the merge's agreement test
+    gives the same decision on random partial maps of the circle, and the same counts
+    whenever the maps agree."""
+    rng = np.random.default_rng(0)
+    t = TARGETS
+    args = (GRAPH.ptr, GRAPH.neighbour, GRAPH.length, t.indptr, t.indices, t.dist, 0.03, 0.05)
+    base = [IDENTITY, MIRROR, (IDENTITY + 8) % T]
+    stopped = 0
+    for _ in range(400):
+        a, b = (np.where(rng.random(S) < 0.7, (base[rng.integers(3)] + rng.integers(-1, 2, S)) % T, -1) for _ in "ab")
+        full = _kernels.edge_agreement(a, b, False, *args)
+        early = _kernels.edge_agreement(a, b, False, *args, MERGE_AGREEMENT)
+        decide = [bool(g and g >= MERGE_AGREEMENT * (g + d)) for g, d in (full, early)]
+        assert decide[0] == decide[1]
+        if decide[0]:
+            assert early == full
+        stopped += early != full
+    assert stopped > 50  # the early stop is exercised
 
 
 def test_vertex_map_and_nearest_targets():

@@ -217,33 +217,67 @@ def refine(image, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, min_neighb
 
 
 @nb.njit(cache=True)
-def edge_agreement(a, b, internal, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, same_tol):
+def _compared(a, b, u, internal, e, g_nbr):
+    """Whether edge ``e`` (u, v) is one :func:`edge_agreement` compares, u mapped by a and
+    not compared on its own images."""
+    v = g_nbr[e]
+    return not (b[v] < 0 or (not internal and a[v] >= 0) or (internal and v < u))
+
+
+@nb.njit(cache=True)
+def _comparisons(a, b, internal, g_ptr, g_nbr):
+    """How many comparisons :func:`edge_agreement` makes."""
+    n = 0
+    for u in range(len(a)):
+        if a[u] < 0:
+            continue
+        if b[u] >= 0 and not internal:
+            n += 1
+            continue
+        for e in range(g_ptr[u], g_ptr[u + 1]):
+            if _compared(a, b, u, internal, e, g_nbr):
+                n += 1
+    return n
+
+
+@nb.njit(cache=True)
+def edge_agreement(a, b, internal, g_ptr, g_nbr, g_len, t_ptr, t_idx, t_dist, d_error, same_tol, share=0.0):
     """(agreeing, disagreeing) counts between maps a and b, both (S,) with -1 = unmapped.
 
     A sample mapped by both agrees when its two images lie within ``same_tol``; an edge
     (u, v) with u mapped only by a and v only by b agrees when the images keep the edge
     length within ``d_error``. With ``internal`` (and a = b) it counts the edges inside
     one map instead: its consistency.
+
+    With ``share`` > 0 it stops as soon as ``agreeing >= share * (agreeing + disagreeing)``
+    is out of reach whatever the comparisons left give (most pairs of different maps
+    disagree early): the counts are then those made so far, and they fail that test too.
     """
+    remaining = _comparisons(a, b, internal, g_ptr, g_nbr) if share > 0 else 0
     good, bad = 0, 0
     for u in range(len(a)):
         if a[u] < 0:
             continue
         if b[u] >= 0 and not internal:
+            remaining -= 1
             if find(t_ptr, t_idx, t_dist, a[u], b[u], same_tol) <= same_tol:
                 good += 1
             else:
                 bad += 1
+                if share > 0 and good + remaining < share * (good + remaining + bad):
+                    return good, bad
             continue
         for e in range(g_ptr[u], g_ptr[u + 1]):
-            v = g_nbr[e]
-            if b[v] < 0 or (not internal and a[v] >= 0) or (internal and v < u):
+            if not _compared(a, b, u, internal, e, g_nbr):
                 continue
-            d = find(t_ptr, t_idx, t_dist, a[u], b[v], g_len[e] + d_error)
+            remaining -= 1
+            d = find(t_ptr, t_idx, t_dist, a[u], b[g_nbr[e]], g_len[e] + d_error)
             if abs(d - g_len[e]) < d_error:
                 good += 1
             else:
                 bad += 1
+                if share > 0 and good + remaining < share * (good + remaining + bad):
+                    return good, bad
     return good, bad
 
 

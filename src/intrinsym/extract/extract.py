@@ -52,6 +52,10 @@ __all__ = [
     "refine",
 ]
 
+#: Two maps describe the same map (:func:`_merge`) when they agree on at least this share of
+#: their shared samples and the edges between them.
+MERGE_AGREEMENT = 0.8
+
 
 def normalise_rows(marginals: np.ndarray) -> np.ndarray:
     """(S, T) float32 marginals divided by their row maxima (rows of zeros stay zero)."""
@@ -361,7 +365,7 @@ def _merge(
     """Greedy union of maps that describe the same map, in the given order.
 
     A map joins an earlier group when they agree (on shared samples and across the
-    edges between them) at least 80% of the time; the group keeps its own images where
+    edges between them) at least ``MERGE_AGREEMENT`` of the time; the group keeps its own images where
     both map a sample. Two different symmetries agree only near their common fixed
     points; a lower bar lets noisy parts of other maps into the group.
     The ``extra`` maps come last, and one that agrees with a group of ``images`` is
@@ -386,8 +390,9 @@ def _merge(
                 t.dist,
                 p.d_error,
                 p.peak_radius,
+                MERGE_AGREEMENT,
             )
-            if good and good >= 0.8 * (good + bad):
+            if good and good >= MERGE_AGREEMENT * (good + bad):
                 if i < len(images) or j >= n_main:
                     np.copyto(group, image, where=group < 0)
                 break
