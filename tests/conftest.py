@@ -22,6 +22,11 @@ import trimesh
 from hypothesis import settings
 from scipy.spatial import cKDTree
 
+from intrinsym.evaluation import evaluate
+from intrinsym.geodesics import geodesics
+from intrinsym.mesh import generated as shapes
+from intrinsym.mesh.shape import from_arrays, surface_area
+
 # Property tests draw the same examples on every run (a test that fails, fails again
 # on a fresh clone); HYPOTHESIS_PROFILE=explore draws new ones, to look for new failures.
 settings.register_profile("reproducible", derandomize=True, database=None)
@@ -283,3 +288,32 @@ def unit_square_grid(n=24):
     a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
     f = np.concatenate([np.column_stack([a, a + n + 1, a + 1]), np.column_stack([a + 1, a + n + 1, a + n + 2])])
     return v, f
+
+
+@pytest.fixture(scope="session")
+def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
+    """The posed figure (434 vertices) and the vertices of it above y = -1 (one limb's
+    end cut away, 361 vertices)."""
+    figure = shapes.figure(6)
+    keep = figure.vertices[:, 1] > -1.0
+    return figure, np.flatnonzero(keep)
+
+
+def part_of(figure: shapes.GeneratedShape, used: np.ndarray):
+    """The figure's mesh restricted to ``used`` (faces with all three corners in it)."""
+    keep = np.zeros(len(figure.vertices), dtype=bool)
+    keep[used] = True
+    faces = figure.faces[keep[figure.faces].all(axis=1)]
+    index = np.full(len(figure.vertices), -1)
+    index[used] = np.arange(len(used))
+    return from_arrays(figure.vertices[used], index[faces])
+
+
+def right_share(figure: shapes.GeneratedShape, used: np.ndarray, images: np.ndarray) -> float:
+    """Share of the part's vertices whose image lies within 0.10 sqrt(area) of their own
+    vertex of the figure or of its image under one of the figure's symmetries."""
+    unit = np.sqrt(surface_area(from_arrays(figure.vertices, figure.faces)))
+    graph = geodesics.surface_graph(figure.vertices / unit, figure.faces)
+    truths = [used, *(np.asarray(s)[used] for s in figure.symmetries)]
+    errors = np.min([evaluate.map_errors(images, t, graph) for t in truths], axis=0)
+    return float(np.mean(errors <= 0.10))

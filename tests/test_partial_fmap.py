@@ -9,10 +9,10 @@ import pytest
 import scipy.linalg
 import trimesh
 
+from conftest import part_of, right_share
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
 from intrinsym.globalmap import confidence, part_map, partial_fmap
-from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.params import Params
 from intrinsym.surface import prepare_pair
@@ -75,41 +75,13 @@ def test_the_normal_equations_are_solved_as_the_dense_system_solves_them() -> No
         assert np.allclose(found, dense, rtol=1e-7, atol=1e-9 * np.abs(dense).max())
 
 
-@pytest.fixture(scope="module")
-def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
-    """The posed figure (434 vertices) and the vertices of it above y = -1 (one limb's
-    end cut away, 361 vertices)."""
-    figure = shapes.figure(6)
-    keep = figure.vertices[:, 1] > -1.0
-    return figure, np.flatnonzero(keep)
-
-
-def _part(figure: shapes.GeneratedShape, used: np.ndarray):
-    keep = np.zeros(len(figure.vertices), dtype=bool)
-    keep[used] = True
-    faces = figure.faces[keep[figure.faces].all(axis=1)]
-    index = np.full(len(figure.vertices), -1)
-    index[used] = np.arange(len(used))
-    return from_arrays(figure.vertices[used], index[faces])
-
-
-def _right(figure: shapes.GeneratedShape, used: np.ndarray, images: np.ndarray) -> float:
-    """Share of the part's vertices whose image lies within 0.10 sqrt(area) of their own
-    vertex of the figure or of its image under one of the figure's symmetries."""
-    unit = np.sqrt(surface_area(from_arrays(figure.vertices, figure.faces)))
-    graph = geodesics.surface_graph(figure.vertices / unit, figure.faces)
-    truths = [used, *(np.asarray(s)[used] for s in figure.symmetries)]
-    errors = np.min([evaluate.map_errors(images, t, graph) for t in truths], axis=0)
-    return float(np.mean(errors <= 0.10))
-
-
 def test_a_cut_changes_the_descriptors_only_near_it(figure_and_part) -> None:
     """The part's descriptor functions equal the whole's at the same vertices away from
     the cut (farther than the spin radius), up to the sampling of the images: their
     difference there is a small share of the difference between two vertices."""
     figure, used = figure_and_part
     p = Params()
-    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
     d_part, d_whole = part_map.part_descriptors(a, b, p)
     assert d_part.shape == (len(a.shape.vertices), part_map.SPIN_COMPONENTS) and d_whole.shape[1] == d_part.shape[1]
     assert d_whole.min() == 0.0
@@ -127,15 +99,15 @@ def test_a_cut_changes_the_descriptors_only_near_it(figure_and_part) -> None:
 def test_a_part_of_the_figure_maps_onto_its_place(figure_and_part) -> None:
     # measured at this size: 0.92 within 0.10, the indicator covering 0.98 of the part's area
     figure, used = figure_and_part
-    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
-    assert _right(figure, used, part_map.part_fmap_map(a, b, Params())) >= 0.85
+    a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    assert right_share(figure, used, part_map.part_fmap_map(a, b, Params())) >= 0.85
 
 
 def test_the_less_distorted_map_is_kept(figure_and_part) -> None:
     """choose_part_map keeps the extraction's map when it is the true one and the
     partial functional map's is random, and the other way round."""
     figure, used = figure_and_part
-    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
     rng = np.random.default_rng(0)
     random_map = rng.integers(0, len(figure.vertices), len(used))
     image, stats = part_map.choose_part_map(used.copy(), a, b, random_map)
@@ -166,7 +138,7 @@ def test_refining_a_cell_map_gives_the_vertices_their_own_images(figure_and_part
     image; refined_if_less_distorted keeps it, not a random map; a map without images
     comes back as it is."""
     figure, used = figure_and_part
-    a, b = prepare_pair(_part(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
     rng = np.random.default_rng(0)
     centres = rng.choice(len(used), 30, replace=False)
     part_vertices = figure.vertices[used]

@@ -28,7 +28,15 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .globalmap.part_map import choose_part_map, part_fmap_map, refine_part_map, refined_if_less_distorted
+from .globalmap.part_map import (
+    PART_MAP_CHANGE,
+    choose_part_map,
+    part_fmap_map,
+    refine_part_map,
+    refined_if_less_distorted,
+    trilaterated_if_less_distorted,
+)
+from .globalmap.part_trilateration import trilaterated_maps
 from .globalmap.vertex_maps import inverse_vertex_map
 from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
@@ -575,7 +583,9 @@ def match(
     extraction's or a partial functional map's
     (:func:`~intrinsym.globalmap.part_map.choose_part_map`), whichever changes fewer of
     A's geodesic distances, refined by ZoomOut where that keeps more of them
-    (:func:`~intrinsym.globalmap.part_map.refine_part_map`; ``run.json``:
+    (:func:`~intrinsym.globalmap.part_map.refine_part_map`), then trilaterated from
+    the anchors on which it keeps A's distances where that keeps more of them still
+    (:func:`~intrinsym.globalmap.part_trilateration.trilaterated_maps`; ``run.json``:
     ``part_map``; the stage ``part map``, 4-9 s on the SHREC'16 shapes on a 2-core
     machine). The share of A's short distances the
     kept map keeps is the score of its confidence
@@ -680,7 +690,9 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     """A part's match to its whole with the vertex map :func:`choose_part_map` keeps
     (``global_map``: the partial functional map's or the extraction's, refined by
     :func:`refine_part_map` where that changes fewer of the part's distances
-    (:func:`refined_if_less_distorted`); ``info.part_map``); with ``p.part_fmap`` off or
+    (:func:`refined_if_less_distorted`), then by the least distorted round of
+    :func:`trilaterated_maps` where that changes fewer still
+    (:func:`trilaterated_if_less_distorted`); ``info.part_map``); with ``p.part_fmap`` off or
     a point cloud, the extraction's map as it is, measured. The partial functional map and the
     refinement are solved on the two meshes as given (``shapes``, the part and the whole,
     prepared again without refinement when either was refined)."""
@@ -694,6 +706,12 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     better, stats = refined_if_less_distorted(refined, part, whole, stats)
     if better:
         image = refined
+    kept = extraction_map if image is None else image
+    located, stats = trilaterated_if_less_distorted(
+        trilaterated_maps(kept, *given, PART_MAP_CHANGE), part, whole, stats
+    )
+    if located is not None:
+        image = located
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

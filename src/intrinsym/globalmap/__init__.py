@@ -3,7 +3,9 @@ paper's Sec. 5.1; the paper stops at the sampled symmetries).
 
 :mod:`.globalmap` chooses among candidate maps (the extraction's, seeded ZoomOut's,
 the spectral ones) by the marginal mass they keep; :mod:`.refine` refines a map by
-geodesic trilateration and spectral descent; :mod:`.vertex_maps` extends a sampled
+geodesic trilateration and spectral descent; :mod:`.part_map` chooses a part's map
+into its whole (the extraction's, a partial functional map's from :mod:`.partial_fmap`,
+refined, or trilaterated by :mod:`.part_trilateration`); :mod:`.vertex_maps` extends a sampled
 symmetry to every input vertex; :mod:`.confidence` measures how far the marginals
 support a map (and calibrates it); :mod:`.distortion` how far a map is from an isometry,
 without ground truth.

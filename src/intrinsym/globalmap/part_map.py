@@ -13,6 +13,7 @@ keeps is the score the part's confidence is calibrated on
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +39,7 @@ __all__ = [
     "refine_part_map",
     "refined_if_less_distorted",
     "spin_functions",
+    "trilaterated_if_less_distorted",
 ]
 
 #: Pairs of the part within this geodesic distance (sqrt(area) of the whole) are compared...
@@ -75,17 +77,28 @@ class PartMapStats:
     refined : bool
         The kept map was replaced by its refinement (:func:`refine_part_map`,
         :func:`refined_if_less_distorted`).
+    trilaterated : bool
+        The kept (or refined) map was then replaced by one of its trilaterations
+        (:func:`intrinsym.globalmap.part_trilateration.trilaterated_maps`,
+        :func:`trilaterated_if_less_distorted`; ``distortion["trilaterated"]``: the least
+        distorted round's share).
     """
 
     source: str
     distortion: dict[str, float | None] = field(default_factory=dict)
     refined: bool = False
+    trilaterated: bool = False
+
+    @property
+    def final(self) -> str:
+        """The key of ``distortion`` that measures the map kept in the end."""
+        return "trilaterated" if self.trilaterated else "refined" if self.refined else self.source
 
     @property
     def kept(self) -> float:
         """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance
         the kept map keeps within ``PART_MAP_CHANGE`` (0 for a map that gives no image)."""
-        share = self.distortion.get("refined" if self.refined else self.source)
+        share = self.distortion.get(self.final)
         return 0.0 if share is None else 1.0 - share
 
 
@@ -243,10 +256,54 @@ def refined_if_less_distorted(
     stats : PartMapStats
         ``stats`` with the refinement's share in ``distortion`` and ``refined`` set.
     """
-    share, kept = _changed(refined_map, _working_inputs(part), part, whole), stats.distortion.get(stats.source)
-    distortion = {**stats.distortion, "refined": float(share) if np.isfinite(share) else None}
-    better = bool(np.isfinite(share) and (kept is None or share < kept))
-    return better, PartMapStats(stats.source, distortion, better)
+    distortion, better = _weighed("refined", _changed(refined_map, _working_inputs(part), part, whole), stats)
+    return better, dataclasses.replace(stats, distortion=distortion, refined=better)
+
+
+def trilaterated_if_less_distorted(
+    maps: list[np.ndarray], part: Surface, whole: Surface, stats: PartMapStats
+) -> tuple[np.ndarray | None, PartMapStats]:
+    """The round of a part's map's trilateration that changes the fewest of the part's
+    geodesic distances, if it changes fewer than the map kept so far.
+
+    The test of :func:`choose_part_map` and :func:`refined_if_less_distorted`, over the
+    rounds of :func:`intrinsym.globalmap.part_trilateration.trilaterated_maps`: a round
+    can also carry a core of right images onto a wrong region, and then tears more of
+    the part's distances than the map it started from.
+
+    Parameters
+    ----------
+    maps : list of (N_part_input,) int
+        The trilaterated maps (none: nothing to weigh).
+    part, whole : Surface
+        As in :func:`choose_part_map`.
+    stats : PartMapStats
+        :func:`refined_if_less_distorted`'s.
+
+    Returns
+    -------
+    vertex_map : (N_part_input,) int64 or None
+        The least distorted round's map; None when the map kept so far stays.
+    stats : PartMapStats
+        ``stats`` with that round's share in ``distortion`` and ``trilaterated`` set.
+    """
+    if not maps:
+        return None, stats
+    from_inputs = _working_inputs(part)
+    shares = np.array([_changed(m, from_inputs, part, whole) for m in maps])
+    shares[~np.isfinite(shares)] = np.inf
+    best = int(np.argmin(shares))
+    distortion, better = _weighed("trilaterated", shares[best], stats)
+    located = np.asarray(maps[best], dtype=np.int64) if better else None
+    return located, dataclasses.replace(stats, distortion=distortion, trilaterated=better)
+
+
+def _weighed(name: str, share: float, stats: PartMapStats) -> tuple[dict[str, float | None], bool]:
+    """``stats.distortion`` with a candidate's ``share`` under ``name`` (None: no image),
+    and whether it changes fewer of the part's distances than the map kept so far."""
+    kept = stats.distortion.get(stats.final)
+    distortion = {**stats.distortion, name: float(share) if np.isfinite(share) else None}
+    return distortion, bool(np.isfinite(share) and (kept is None or share < kept))
 
 
 def _changed(input_map: np.ndarray, from_inputs: np.ndarray, part: Surface, whole: Surface) -> float:

@@ -1,0 +1,182 @@
+"""A part's map into its whole trilaterated from the anchors on which it keeps its distances.
+
+A partial functional map (or the extraction's) of a part into its whole is often right
+on most of the part and wrong on a region of it: a leg sent to the other pair of legs,
+the head turned onto the neck. Where it is right it keeps the part's geodesic distances,
+and those right images locate every other vertex: each vertex of the part is sent to
+the vertex of the whole whose distances to the right images best repeat its own
+distances to their anchors (within :data:`TRILATERATION_REACH` of it). The right images
+are found without the truth, as the largest set of farthest-point anchors whose
+mutual distances the map keeps (:func:`anchor_core`). ``match`` keeps the trilaterated
+map only where it changes fewer of the part's short distances than the map it comes
+from (:func:`intrinsym.globalmap.part_map.choose_part_map`'s test).
+
+Unlike :func:`intrinsym.globalmap.refine.trilaterate`, which descends from each image
+to a nearby vertex of the same shape, the search here is global over the whole: a region
+mapped wholly wrong has no right image nearby to descend to.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ..geodesics.geodesics import distances_from, surface_graph
+from ..mesh.sampling import farthest_point_sampling
+from ..surface import Surface
+
+__all__ = [
+    "CORE_AGREEMENT",
+    "TRILATERATION_ANCHORS",
+    "TRILATERATION_REACH",
+    "TRILATERATION_ROUNDS",
+    "anchor_core",
+    "trilaterated_maps",
+]
+
+#: Farthest-point anchors spread over the part's mapped vertices (Euclidean, seed 0).
+TRILATERATION_ANCHORS = 64
+#: A vertex is located from the anchors within this geodesic distance of it on the part
+#: (sqrt(area) of the whole, the pair's common unit), and two anchors are compared
+#: when they lie this close: a cut or a hole lengthens the part's geodesics against the
+#: whole's more the farther they reach. Set once, not tuned (docs/results.md gives
+#: 0.35 and 0.70 beside it).
+TRILATERATION_REACH = 0.5
+#: An anchor stays in the core while the map keeps its distance to at least this share
+#: of the core's anchors within reach (within ``PART_MAP_CHANGE``).
+CORE_AGREEMENT = 0.9
+#: A vertex with fewer core anchors within reach keeps its image.
+MIN_ANCHORS = 3
+#: Rounds of :func:`trilaterated_maps`, each from the previous round's core.
+TRILATERATION_ROUNDS = 3
+
+
+def anchor_core(part_distances: np.ndarray, whole_distances: np.ndarray, reach: float, change: float) -> np.ndarray:
+    """The largest set of anchors whose mutual distances a map keeps, found greedily.
+
+    Starting from every anchor, the one that keeps its distance (within ``change``) to
+    the smallest share of the others within ``reach`` is dropped until every anchor
+    keeps at least :data:`CORE_AGREEMENT` of them.
+
+    Parameters
+    ----------
+    part_distances : (A, A) float
+        Geodesic distances between the anchors on the part (``inf`` beyond ``reach``).
+    whole_distances : (A, A) float
+        Geodesic distances between their images on the whole.
+    reach, change : float
+        Pairs farther apart than ``reach`` on the part are not compared; a pair's distance
+        is kept when the map changes it by at most ``change`` (graph length units).
+
+    Returns
+    -------
+    (A,) bool
+        The core; it keeps at least :data:`MIN_ANCHORS` anchors (all of them when there
+        are fewer).
+    """
+    near = part_distances < reach
+    np.fill_diagonal(near, False)
+    kept = np.zeros_like(near)
+    kept[near] = np.abs(part_distances[near] - whole_distances[near]) <= change
+    core = np.ones(len(near), dtype=bool)
+    while core.sum() > MIN_ANCHORS:
+        members = np.flatnonzero(core)
+        compared = near[np.ix_(members, members)].sum(axis=1)
+        share = kept[np.ix_(members, members)].sum(axis=1) / np.maximum(compared, 1)
+        share[compared == 0] = 0.0
+        worst = int(np.argmin(share))
+        if share[worst] >= CORE_AGREEMENT:
+            break
+        core[members[worst]] = False
+    return core
+
+
+@nb.njit(parallel=True, cache=True)
+def _best_images(part_distances, whole_distances, reach, start):  # pragma: no cover
+    """Per part vertex, the whole's vertex whose distances to the anchors' images best
+    repeat (least sum of absolute differences) the vertex's distances to the anchors
+    within ``reach``; ``start`` (-1: none) where fewer than MIN_ANCHORS are. The sum runs
+    over the nearest anchors first and stops once it exceeds the best so far, which the
+    start's own sum bounds from the outset."""
+    n_anchors, n_part = part_distances.shape
+    n_whole = whole_distances.shape[0]
+    out = start.copy()
+    for x in nb.prange(n_part):
+        column = part_distances[:, x]
+        order = np.argsort(column)
+        m = 0
+        while m < n_anchors and column[order[m]] < reach:
+            m += 1
+        if m < MIN_ANCHORS:
+            continue
+        wanted = column[order[:m]]
+        arg = start[x]
+        best = np.inf
+        if arg >= 0:
+            best = 0.0
+            for j in range(m):
+                best += abs(whole_distances[arg, order[j]] - wanted[j])
+        for y in range(n_whole):
+            row = whole_distances[y]
+            cost = 0.0
+            for j in range(m):
+                cost += abs(row[order[j]] - wanted[j])
+                if cost >= best:
+                    break
+            if cost < best:
+                best = cost
+                arg = y
+        out[x] = arg
+    return out
+
+
+def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface, change: float) -> list[np.ndarray]:
+    """A part's map into its whole trilaterated from its anchor core, round after round.
+
+    Each round finds the core of the previous round's map (:func:`anchor_core`) and sends
+    every vertex of the part to the vertex of the whole whose distances to the core's
+    images best repeat its own to the core's anchors within :data:`TRILATERATION_REACH`.
+    A right core grows from round to round (on holes_cat_shape_9: 16, 33, 41 of 64
+    anchors); the caller keeps the round that changes the fewest of the part's distances.
+
+    Parameters
+    ----------
+    vertex_map : (N_part_input,) int
+        Input vertex of the whole of every input vertex of the part, -1 for none.
+    part, whole : Surface
+        Meshes prepared in one unit (:func:`intrinsym.surface.prepare_pair`). The
+        distances are measured on their mesh edges and the chords across their edges
+        (:func:`intrinsym.geodesics.geodesics.surface_graph` with ``rings=1``): the
+        working graphs' longer chords cut across a coarse mesh's thin limbs and tails,
+        and do so differently on the two meshes.
+    change : float
+        A pair of anchors keeps its distance within this (sqrt(area) of the whole).
+
+    Returns
+    -------
+    list of (N_part_input,) int64
+        :data:`TRILATERATION_ROUNDS` maps (none when fewer than
+        :data:`TRILATERATION_ANCHORS` of the part's vertices have an image). Each gives
+        every vertex located from at least :data:`MIN_ANCHORS` core anchors an image, and
+        the previous round's elsewhere (-1 where it has none).
+    """
+    if part.shape.faces is None or whole.shape.faces is None:
+        raise ValueError("trilaterating a part's map needs two meshes, not point clouds")
+    image = np.asarray(vertex_map, dtype=np.int64)[part.nearest_input_vertex(part.shape.vertices)]
+    mapped = np.flatnonzero(image >= 0)
+    if len(mapped) < TRILATERATION_ANCHORS:
+        return []
+    part_graph, whole_graph = (surface_graph(s.shape.vertices, s.shape.faces, rings=1) for s in (part, whole))
+    anchors = mapped[farthest_point_sampling(part.shape.vertices[mapped], TRILATERATION_ANCHORS)]
+    on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
+    whole_inputs = whole.nearest_input_vertex(whole.shape.vertices)
+    working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
+    maps = []
+    for _ in range(TRILATERATION_ROUNDS):
+        # a vertex's image lies within reach of each anchor's image it is located from
+        # (up to the change allowed); farther vertices of the whole are never candidates
+        on_whole = distances_from(whole_graph, working[anchors], limit=2.0 * TRILATERATION_REACH)
+        core = anchor_core(on_part[:, anchors], on_whole[:, working[anchors]], TRILATERATION_REACH, change)
+        working = _best_images(on_part[core], np.ascontiguousarray(on_whole[core].T), TRILATERATION_REACH, working)
+        maps.append(np.where(working >= 0, whole_inputs[np.maximum(working, 0)], -1)[part.vertex_map])
+    return maps
