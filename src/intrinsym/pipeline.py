@@ -586,7 +586,7 @@ def match(
     (:func:`~intrinsym.globalmap.part_map.refine_part_map`), then trilaterated from
     the anchors on which it keeps A's distances where that keeps more of them still
     (:func:`~intrinsym.globalmap.part_trilateration.trilaterated_maps`; ``run.json``:
-    ``part_map``; the stage ``part map``, 4-9 s on the SHREC'16 shapes on a 2-core
+    ``part_map``; the stage ``part map``, 7-16 s on the SHREC'16 shapes on a 2-core
     machine). The share of A's short distances the
     kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
