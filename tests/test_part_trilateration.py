@@ -60,7 +60,7 @@ def test_a_region_mapped_at_random_is_located_again(figure_and_part) -> None:
     # measured: 0.86 -> 1.00 (seeds 1-3 of the random images: 0.85-0.88 -> 1.00)
     assert right_share(figure, used, broken) < 0.87
     _, stats = part_map.choose_part_map(broken, a, b)
-    rounds = part_trilateration.trilaterated_maps(broken, a, b, part_map.PART_MAP_CHANGE)
+    rounds = part_trilateration.trilaterated_maps(broken, a, b)
     assert len(rounds) == part_trilateration.TRILATERATION_ROUNDS
     located, kept = part_map.trilaterated_if_less_distorted(rounds, a, b, stats)
     assert located is not None and kept.trilaterated and kept.final == "trilaterated"
@@ -69,11 +69,11 @@ def test_a_region_mapped_at_random_is_located_again(figure_and_part) -> None:
     assert right_share(figure, used, located) >= 0.97
     # the true map keeps every distance: no round replaces it
     _, stats = part_map.choose_part_map(used.copy(), a, b)
-    rounds = part_trilateration.trilaterated_maps(used.copy(), a, b, part_map.PART_MAP_CHANGE)
+    rounds = part_trilateration.trilaterated_maps(used.copy(), a, b)
     located, kept = part_map.trilaterated_if_less_distorted(rounds, a, b, stats)
     assert located is None and not kept.trilaterated and kept.final == "extraction"
     # too few images for the anchors: nothing to trilaterate
     few = np.full(len(used), -1)
     few[:10] = used[:10]
-    assert part_trilateration.trilaterated_maps(few, a, b, part_map.PART_MAP_CHANGE) == []
+    assert part_trilateration.trilaterated_maps(few, a, b) == []
     assert part_map.trilaterated_if_less_distorted([], a, b, stats) == (None, stats)

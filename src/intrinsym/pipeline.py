@@ -29,7 +29,6 @@ from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
 from .globalmap.part_map import (
-    PART_MAP_CHANGE,
     choose_part_map,
     part_fmap_map,
     refine_part_map,
@@ -707,9 +706,7 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     if better:
         image = refined
     kept = extraction_map if image is None else image
-    located, stats = trilaterated_if_less_distorted(
-        trilaterated_maps(kept, *given, PART_MAP_CHANGE), part, whole, stats
-    )
+    located, stats = trilaterated_if_less_distorted(trilaterated_maps(kept, *given), part, whole, stats)
     if located is not None:
         image = located
     info = dataclasses.replace(result.info, part_map=stats)

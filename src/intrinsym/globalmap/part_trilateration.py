@@ -24,6 +24,7 @@ import numpy as np
 from ..geodesics.geodesics import distances_from, surface_graph
 from ..mesh.sampling import farthest_point_sampling
 from ..surface import Surface
+from .part_map import PART_MAP_CHANGE
 
 __all__ = [
     "CORE_AGREEMENT",
@@ -82,8 +83,8 @@ def anchor_core(part_distances: np.ndarray, whole_distances: np.ndarray, reach: 
     while core.sum() > MIN_ANCHORS:
         members = np.flatnonzero(core)
         compared = near[np.ix_(members, members)].sum(axis=1)
+        # an anchor with no other within reach keeps a share of 0 and goes first
         share = kept[np.ix_(members, members)].sum(axis=1) / np.maximum(compared, 1)
-        share[compared == 0] = 0.0
         worst = int(np.argmin(share))
         if share[worst] >= CORE_AGREEMENT:
             break
@@ -130,7 +131,7 @@ def _best_images(part_distances, whole_distances, reach, start):  # pragma: no c
     return out
 
 
-def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface, change: float) -> list[np.ndarray]:
+def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> list[np.ndarray]:
     """A part's map into its whole trilaterated from its anchor core, round after round.
 
     Each round finds the core of the previous round's map (:func:`anchor_core`) and sends
@@ -148,9 +149,8 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface, cha
         distances are measured on their mesh edges and the chords across their edges
         (:func:`intrinsym.geodesics.geodesics.surface_graph` with ``rings=1``): the
         working graphs' longer chords cut across a coarse mesh's thin limbs and tails,
-        and do so differently on the two meshes.
-    change : float
-        A pair of anchors keeps its distance within this (sqrt(area) of the whole).
+        and do so differently on the two meshes. A pair of anchors keeps its distance
+        when the map changes it by at most ``PART_MAP_CHANGE``.
 
     Returns
     -------
@@ -171,12 +171,17 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface, cha
     on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
     whole_inputs = whole.nearest_input_vertex(whole.shape.vertices)
     working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
+    on_whole = np.empty((len(anchors), len(whole.shape.vertices)))
+    images = np.full(len(anchors), -1)
     maps = []
     for _ in range(TRILATERATION_ROUNDS):
         # a vertex's image lies within reach of each anchor's image it is located from
-        # (up to the change allowed); farther vertices of the whole are never candidates
-        on_whole = distances_from(whole_graph, working[anchors], limit=2.0 * TRILATERATION_REACH)
-        core = anchor_core(on_part[:, anchors], on_whole[:, working[anchors]], TRILATERATION_REACH, change)
+        # (up to the change allowed); farther vertices of the whole are never candidates.
+        # Only the anchors whose image the last round moved are searched from again.
+        moved = working[anchors] != images
+        images = working[anchors]
+        on_whole[moved] = distances_from(whole_graph, images[moved], limit=2.0 * TRILATERATION_REACH)
+        core = anchor_core(on_part[:, anchors], on_whole[:, images], TRILATERATION_REACH, PART_MAP_CHANGE)
         working = _best_images(on_part[core], np.ascontiguousarray(on_whole[core].T), TRILATERATION_REACH, working)
         maps.append(np.where(working >= 0, whole_inputs[np.maximum(working, 0)], -1)[part.vertex_map])
     return maps
