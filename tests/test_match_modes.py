@@ -82,10 +82,12 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
     # the source is the part: its map is the extraction's or the partial functional map's,
     # whichever changes fewer of its distances, refined and trilaterated where each changes
-    # fewer, and run.json says which
+    # fewer, a trilaterated one polished, and run.json says which
     assert stats is not None and "part map" in result.info.seconds
-    kept = stats.distortion[stats.final]
-    assert kept is not None and all(d is None or kept <= d for d in stats.distortion.values())
+    weighed = stats.distortion["trilaterated" if stats.polished else stats.final]
+    assert weighed is not None
+    assert all(d is None or weighed <= d for k, d in stats.distortion.items() if k != "polished")
+    assert stats.polished == stats.trilaterated and stats.kept == 1.0 - stats.distortion[stats.final]
     assert (result.global_map is not None) == (stats.source == "partial_fmap" or stats.refined or stats.trilaterated)
     assert back.info.part_map == stats and np.array_equal(back.symmetry_map(), result.symmetry_map())
     half, whole, _ = half_and_whole

@@ -5,6 +5,7 @@ region of the posed figure's part mapped at random located again."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from conftest import part_of, right_share
 from intrinsym.globalmap import part_map, part_trilateration
@@ -49,8 +50,8 @@ def test_the_search_is_the_dense_argmin() -> None:
 def test_a_region_mapped_at_random_is_located_again(figure_and_part) -> None:
     """The figure's part mapped by the truth except on the 60 vertices nearest one end,
     which go anywhere: the least distorted round puts the part back within 0.10 of a
-    symmetry of the truth, and trilaterated_if_less_distorted keeps it; the true map
-    stays as it is."""
+    symmetry of the truth, trilaterated_if_less_distorted keeps it, and its polish keeps
+    it there; the true map stays as it is."""
     figure, used = figure_and_part
     a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
     rng = np.random.default_rng(0)
@@ -67,11 +68,18 @@ def test_a_region_mapped_at_random_is_located_again(figure_and_part) -> None:
     assert kept.distortion["trilaterated"] < kept.distortion["extraction"]
     assert kept.kept == 1.0 - kept.distortion["trilaterated"]
     assert right_share(figure, used, located) >= 0.97
-    # the true map keeps every distance: no round replaces it
+    # polished by ZoomOut, it stays right, and its own share is the one the confidence takes
+    polished = part_map.with_polish(part_map.refine_part_map(located, a, b), a, b, kept)
+    assert polished.polished and polished.final == "polished" and polished.trilaterated
+    assert polished.kept == 1.0 - polished.distortion["polished"]
+    assert right_share(figure, used, part_map.refine_part_map(located, a, b)) >= 0.97
+    # the true map keeps every distance: no round replaces it, and nothing is polished
     _, stats = part_map.choose_part_map(used.copy(), a, b)
     rounds = part_trilateration.trilaterated_maps(used.copy(), a, b)
     located, kept = part_map.trilaterated_if_less_distorted(rounds, a, b, stats)
     assert located is None and not kept.trilaterated and kept.final == "extraction"
+    with pytest.raises(ValueError, match="trilaterated"):
+        part_map.with_polish(used.copy(), a, b, kept)
     # too few images for the anchors: nothing to trilaterate
     few = np.full(len(used), -1)
     few[:10] = used[:10]

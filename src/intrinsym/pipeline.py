@@ -34,6 +34,7 @@ from .globalmap.part_map import (
     refine_part_map,
     refined_if_less_distorted,
     trilaterated_if_less_distorted,
+    with_polish,
 )
 from .globalmap.part_trilateration import trilaterated_maps
 from .globalmap.vertex_maps import inverse_vertex_map
@@ -691,7 +692,8 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     :func:`refine_part_map` where that changes fewer of the part's distances
     (:func:`refined_if_less_distorted`), then by the least distorted round of
     :func:`trilaterated_maps` where that changes fewer still
-    (:func:`trilaterated_if_less_distorted`); ``info.part_map``); with ``p.part_fmap`` off or
+    (:func:`trilaterated_if_less_distorted`) and then refined once more (:func:`with_polish`);
+    ``info.part_map``); with ``p.part_fmap`` off or
     a point cloud, the extraction's map as it is, measured. The partial functional map and the
     refinement are solved on the two meshes as given (``shapes``, the part and the whole,
     prepared again without refinement when either was refined)."""
@@ -708,7 +710,8 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     kept = extraction_map if image is None else image
     located, stats = trilaterated_if_less_distorted(trilaterated_maps(kept, *given), part, whole, stats)
     if located is not None:
-        image = located
+        image = refine_part_map(located, *given)
+        stats = with_polish(image, part, whole, stats)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 
