@@ -69,10 +69,11 @@ def test_a_region_mapped_at_random_is_located_again(figure_and_part) -> None:
     assert kept.kept == 1.0 - kept.distortion["trilaterated"]
     assert right_share(figure, used, located) >= 0.97
     # polished by ZoomOut, it stays right, and its own share is the one the confidence takes
-    polished = part_map.with_polish(part_map.refine_part_map(located, a, b), a, b, kept)
+    polished_map = part_map.refine_part_map(located, a, b)
+    polished = part_map.with_polish(polished_map, a, b, kept)
     assert polished.polished and polished.final == "polished" and polished.trilaterated
     assert polished.kept == 1.0 - polished.distortion["polished"]
-    assert right_share(figure, used, part_map.refine_part_map(located, a, b)) >= 0.97
+    assert right_share(figure, used, polished_map) >= 0.97
     # the true map keeps every distance: no round replaces it, and nothing is polished
     _, stats = part_map.choose_part_map(used.copy(), a, b)
     rounds = part_trilateration.trilaterated_maps(used.copy(), a, b)

@@ -354,8 +354,8 @@ class Params:
         "a part matched to its whole (the smaller shape the source) also gets a partial "
         "functional map (Rodola et al. 2017), and the vertex map of the two that changes "
         "fewer of the part's geodesic distances is kept, refined by ZoomOut and trilaterated "
-        "from the anchors it keeps the distances of, each where that keeps more of them "
-        "(run.json: part_map)",
+        "from the anchors it keeps the distances of, each where that keeps more of them, "
+        "a trilaterated map refined once more (run.json: part_map)",
         "global map",
         paper="off",
         off_flag="--no-part-fmap",

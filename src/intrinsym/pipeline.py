@@ -585,8 +585,9 @@ def match(
     A's geodesic distances, refined by ZoomOut where that keeps more of them
     (:func:`~intrinsym.globalmap.part_map.refine_part_map`), then trilaterated from
     the anchors on which it keeps A's distances where that keeps more of them still
-    (:func:`~intrinsym.globalmap.part_trilateration.trilaterated_maps`; ``run.json``:
-    ``part_map``; the stage ``part map``, 7-16 s on the SHREC'16 shapes on a 2-core
+    (:func:`~intrinsym.globalmap.part_trilateration.trilaterated_maps`) and refined by
+    ZoomOut once more (:func:`~intrinsym.globalmap.part_map.with_polish`; ``run.json``:
+    ``part_map``; the stage ``part map``, 6-15 s on the SHREC'16 shapes on a 2-core
     machine). The share of A's short distances the
     kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).

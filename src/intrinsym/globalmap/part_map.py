@@ -335,17 +335,20 @@ def with_polish(polished_map: np.ndarray, part: Surface, whole: Surface, stats: 
     """
     if not stats.trilaterated:
         raise ValueError("only a trilaterated map is polished")
-    share = _changed(polished_map, _working_inputs(part), part, whole)
-    distortion = {**stats.distortion, "polished": float(share) if np.isfinite(share) else None}
+    distortion = _recorded("polished", _changed(polished_map, _working_inputs(part), part, whole), stats)
     return dataclasses.replace(stats, distortion=distortion, polished=True)
 
 
+def _recorded(name: str, share: float, stats: PartMapStats) -> dict[str, float | None]:
+    """``stats.distortion`` with a candidate's ``share`` under ``name`` (None: no image)."""
+    return {**stats.distortion, name: float(share) if np.isfinite(share) else None}
+
+
 def _weighed(name: str, share: float, stats: PartMapStats) -> tuple[dict[str, float | None], bool]:
-    """``stats.distortion`` with a candidate's ``share`` under ``name`` (None: no image),
-    and whether it changes fewer of the part's distances than the map kept so far."""
+    """:func:`_recorded`, and whether the candidate changes fewer of the part's distances
+    than the map kept so far."""
     kept = stats.distortion.get(stats.final)
-    distortion = {**stats.distortion, name: float(share) if np.isfinite(share) else None}
-    return distortion, bool(np.isfinite(share) and (kept is None or share < kept))
+    return _recorded(name, share, stats), bool(np.isfinite(share) and (kept is None or share < kept))
 
 
 def _changed(input_map: np.ndarray, from_inputs: np.ndarray, part: Surface, whole: Surface) -> float:
