@@ -244,6 +244,7 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         if result.info.part_map is not None:
             row["part_map"] = result.info.part_map.source
             row["part_map_distortion"] = result.info.part_map.distortion
+            row["part_map_final"] = result.info.part_map.final
             row["part_map_seconds"] = result.info.seconds.get("part map")
         two = modes.two_modes(result)
         row["confidence0"], row["confidence1"] = (float(c) for c in two.confidence)

@@ -82,13 +82,19 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
     assert back.info.part and np.array_equal(back.symmetry_confidence(), conf)
     # the source is the part: its map is the extraction's or the partial functional map's,
     # whichever changes fewer of its distances, refined and trilaterated where each changes
-    # fewer, a trilaterated one polished, and run.json says which
+    # fewer, a trilaterated one polished, then replaced by the hypothesis's map where that
+    # changes fewer still, and run.json says which
     assert stats is not None and "part map" in result.info.seconds
-    weighed = stats.distortion["trilaterated" if stats.polished else stats.final]
+    chain = dataclasses.replace(stats, hypothesis=False)
+    weighed = stats.distortion["trilaterated" if chain.polished else chain.final]
     assert weighed is not None
-    assert all(d is None or weighed <= d for k, d in stats.distortion.items() if k != "polished")
+    assert all(d is None or weighed <= d for k, d in stats.distortion.items() if k not in ("polished", "hypothesis"))
     assert stats.polished == stats.trilaterated and stats.kept == 1.0 - stats.distortion[stats.final]
-    assert (result.global_map is not None) == (stats.source == "partial_fmap" or stats.refined or stats.trilaterated)
+    assert "hypothesis" in stats.distortion
+    hypothesis, before = stats.distortion["hypothesis"], stats.distortion[chain.final]
+    assert stats.hypothesis == (hypothesis is not None and (before is None or hypothesis < before))
+    changed = stats.source == "partial_fmap" or stats.refined or stats.trilaterated or stats.hypothesis
+    assert (result.global_map is not None) == changed
     assert back.info.part_map == stats and np.array_equal(back.symmetry_map(), result.symmetry_map())
     half, whole, _ = half_and_whole
     off = intrinsym.match(half, whole, intrinsym.make_params(**SMALL, part_fmap=False))

@@ -37,7 +37,7 @@ def test_the_search_is_the_dense_argmin() -> None:
     on_whole = rng.uniform(0.0, 1.0, (n_whole, n_anchors))
     on_whole[rng.random(on_whole.shape) < 0.1] = np.inf  # beyond the whole's horizon
     start = rng.integers(-1, n_whole, n_part)
-    found = part_trilateration._best_images(on_part, on_whole, reach, start)
+    found = part_trilateration.best_images(on_part, on_whole, reach, start)
     for x in range(n_part):
         near = np.flatnonzero(on_part[:, x] < reach)
         if len(near) < part_trilateration.MIN_ANCHORS:

@@ -100,7 +100,7 @@ def test_a_part_of_the_figure_maps_onto_its_place(figure_and_part) -> None:
     # measured at this size: 0.92 within 0.10, the indicator covering 0.98 of the part's area
     figure, used = figure_and_part
     a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
-    assert right_share(figure, used, part_map.part_fmap_map(a, b, Params())) >= 0.85
+    assert right_share(figure, used, part_map.part_fmap_map(a, b, part_map.part_descriptors(a, b, Params()))) >= 0.85
 
 
 def test_the_less_distorted_map_is_kept(figure_and_part) -> None:

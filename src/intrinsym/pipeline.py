@@ -28,8 +28,12 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
+from .globalmap.part_hypothesis import hypothesis_maps
 from .globalmap.part_map import (
     choose_part_map,
+    hypothesis_if_less_distorted,
+    least_distorted,
+    part_descriptors,
     part_fmap_map,
     refine_part_map,
     refined_if_less_distorted,
@@ -703,7 +707,8 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
     given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
     extraction_map = result.symmetry_map()
-    image, stats = choose_part_map(extraction_map, part, whole, part_fmap_map(*given, p))
+    descriptors = part_descriptors(*given, p)
+    image, stats = choose_part_map(extraction_map, part, whole, part_fmap_map(*given, descriptors))
     refined = refine_part_map(extraction_map if image is None else image, *given)
     better, stats = refined_if_less_distorted(refined, part, whole, stats)
     if better:
@@ -713,6 +718,14 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     if located is not None:
         image = refine_part_map(located, *given)
         stats = with_polish(image, part, whole, stats)
+    polished = []
+    for seed in hypothesis_maps(*given, descriptors):
+        rounds = trilaterated_maps(seed, *given)
+        if rounds:
+            polished.append(refine_part_map(rounds[least_distorted(rounds, part, whole)[0]], *given))
+    hypothesis, stats = hypothesis_if_less_distorted(polished, part, whole, stats)
+    if hypothesis is not None:
+        image = hypothesis
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
@@ -34,6 +35,8 @@ __all__ = [
     "PART_MAP_RADIUS",
     "PartMapStats",
     "choose_part_map",
+    "hypothesis_if_less_distorted",
+    "least_distorted",
     "part_descriptors",
     "part_fmap_map",
     "refine_part_map",
@@ -87,6 +90,12 @@ class PartMapStats:
         The trilaterated map was then refined by ZoomOut once more (:func:`refine_part_map`,
         :func:`with_polish`; ``distortion["polished"]``: its share), as it always is: the
         trilateration's searches are vertex-exact but coarse.
+    hypothesis : bool
+        The map kept so far was then replaced by a map located from a consistent cluster
+        of descriptor matches, trilaterated and polished
+        (:func:`intrinsym.globalmap.part_hypothesis.hypothesis_maps`,
+        :func:`hypothesis_if_less_distorted`; ``distortion["hypothesis"]``: the least
+        distorted hypothesis's share).
     """
 
     source: str
@@ -94,10 +103,13 @@ class PartMapStats:
     refined: bool = False
     trilaterated: bool = False
     polished: bool = False
+    hypothesis: bool = False
 
     @property
     def final(self) -> str:
         """The key of ``distortion`` that measures the map kept in the end."""
+        if self.hypothesis:
+            return "hypothesis"
         if self.polished:
             return "polished"
         return "trilaterated" if self.trilaterated else "refined" if self.refined else self.source
@@ -168,7 +180,7 @@ def part_descriptors(part: Surface, whole: Surface, p: Params) -> tuple[np.ndarr
     return (d_part - mean) @ axes - low, on_whole - low
 
 
-def part_fmap_map(part: Surface, whole: Surface, p: Params) -> np.ndarray:
+def part_fmap_map(part: Surface, whole: Surface, descriptors: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """The partial functional map of a part into its whole, on their input vertices.
 
     Parameters
@@ -179,8 +191,8 @@ def part_fmap_map(part: Surface, whole: Surface, p: Params) -> np.ndarray:
         refinement (``min_vertices`` 0), the meshes as given: the refinement serves BP's
         dense targets, not the spectra or the spin images, and costs time here (a
         6,700-vertex SHREC'16 part refined to 26,600 vertices: 8.3-9.9 s, as given 5.5-5.7 s).
-    p : Params
-        The spin images' parameters (:func:`part_descriptors`).
+    descriptors : (N_part_working, D) and (N_whole_working, D) float
+        :func:`part_descriptors` of the two.
 
     Returns
     -------
@@ -191,7 +203,7 @@ def part_fmap_map(part: Surface, whole: Surface, p: Params) -> np.ndarray:
         raise ValueError("a partial functional map needs two meshes, not point clouds")
     evals_w, evecs_w, mass_w = _spectrum(whole)
     pair = (evals_w, evecs_w, mass_w, whole.shape.vertices, whole.shape.faces)
-    images = partial_functional_map(_spectrum(part), pair, part_descriptors(part, whole, p)).images
+    images = partial_functional_map(_spectrum(part), pair, descriptors).images
     return _working_inputs(whole)[images[part.vertex_map]]
 
 
@@ -295,15 +307,64 @@ def trilaterated_if_less_distorted(
     stats : PartMapStats
         ``stats`` with that round's share in ``distortion`` and ``trilaterated`` set.
     """
-    if not maps:
-        return None, stats
+    return _if_less_distorted("trilaterated", maps, part, whole, stats)
+
+
+def least_distorted(maps: list[np.ndarray], part: Surface, whole: Surface) -> tuple[int, float]:
+    """The map of a part into its whole that changes the fewest of the part's distances.
+
+    Parameters
+    ----------
+    maps : list of (N_part_input,) int, at least one
+        Input vertex of the whole of every input vertex of the part, -1 for none.
+    part, whole : Surface
+        As in :func:`choose_part_map`.
+
+    Returns
+    -------
+    index : int
+        Of the least distorted map (the first where none gives an image).
+    share : float
+        Its share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance it
+        changes by more than ``PART_MAP_CHANGE``; ``inf`` where no map gives an image.
+    """
     from_inputs = _working_inputs(part)
     shares = np.array([_changed(m, from_inputs, part, whole) for m in maps])
     shares[~np.isfinite(shares)] = np.inf
     best = int(np.argmin(shares))
-    distortion, better = _weighed("trilaterated", shares[best], stats)
-    located = np.asarray(maps[best], dtype=np.int64) if better else None
-    return located, dataclasses.replace(stats, distortion=distortion, trilaterated=better)
+    return best, float(shares[best])
+
+
+def hypothesis_if_less_distorted(
+    maps: list[np.ndarray], part: Surface, whole: Surface, stats: PartMapStats
+) -> tuple[np.ndarray | None, PartMapStats]:
+    """The least distorted of a part's hypothesis maps, if it changes fewer of the part's
+    geodesic distances than the map kept so far.
+
+    The test of :func:`choose_part_map`, over the maps located from consistent clusters
+    of descriptor matches (:func:`intrinsym.globalmap.part_hypothesis.hypothesis_maps`),
+    each trilaterated and polished as the kept map is: on the SHREC'16 pairs whose kept
+    map is wrong from the start, a hypothesis's map keeps the part's distances where it
+    is right and tears them where its cluster was a coincidence (docs/results.md).
+    ``maps`` are the hypotheses' polished maps, ``stats`` those of the map kept so far;
+    returned as by :func:`trilaterated_if_less_distorted`, under ``"hypothesis"``.
+    """
+    return _if_less_distorted("hypothesis", maps, part, whole, stats)
+
+
+def _if_less_distorted(
+    name: str, maps: list[np.ndarray], part: Surface, whole: Surface, stats: PartMapStats
+) -> tuple[np.ndarray | None, PartMapStats]:
+    """The least distorted of ``maps`` if it changes fewer of the part's distances than
+    the map kept so far, and ``stats`` with its share under ``name`` and the flag ``name``
+    set accordingly."""
+    if not maps:
+        return None, stats
+    best, share = least_distorted(maps, part, whole)
+    distortion, better = _weighed(name, share, stats)
+    kept = np.asarray(maps[best], dtype=np.int64) if better else None
+    changes: dict[str, Any] = {"distortion": distortion, name: better}
+    return kept, dataclasses.replace(stats, **changes)
 
 
 def with_polish(polished_map: np.ndarray, part: Surface, whole: Surface, stats: PartMapStats) -> PartMapStats:

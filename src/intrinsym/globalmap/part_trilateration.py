@@ -32,6 +32,7 @@ __all__ = [
     "TRILATERATION_REACH",
     "TRILATERATION_ROUNDS",
     "anchor_core",
+    "best_images",
     "trilaterated_maps",
 ]
 
@@ -93,8 +94,10 @@ def anchor_core(part_distances: np.ndarray, whole_distances: np.ndarray, reach: 
 
 
 @nb.njit(parallel=True, cache=True)
-def _best_images(part_distances, whole_distances, reach, start):  # pragma: no cover
-    """Per part vertex, the whole's vertex whose distances to the anchors' images best
+def best_images(part_distances, whole_distances, reach, start):  # pragma: no cover
+    """(A, N_part), (N_whole, A) float, float, (N_part,) int -> (N_part,) int.
+
+    Per part vertex, the whole's vertex whose distances to the anchors' images best
     repeat (least sum of absolute differences) the vertex's distances to the anchors
     within ``reach``; ``start`` (-1: none) where fewer than MIN_ANCHORS are. The sum runs
     over the nearest anchors first and stops once it exceeds the best so far, which the
@@ -182,6 +185,6 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> 
         images = working[anchors]
         on_whole[moved] = distances_from(whole_graph, images[moved], limit=2.0 * TRILATERATION_REACH)
         core = anchor_core(on_part[:, anchors], on_whole[:, images], TRILATERATION_REACH, PART_MAP_CHANGE)
-        working = _best_images(on_part[core], np.ascontiguousarray(on_whole[core].T), TRILATERATION_REACH, working)
+        working = best_images(on_part[core], np.ascontiguousarray(on_whole[core].T), TRILATERATION_REACH, working)
         maps.append(np.where(working >= 0, whole_inputs[np.maximum(working, 0)], -1)[part.vertex_map])
     return maps
