@@ -66,12 +66,15 @@ def test_a_hypothesis_locates_the_figures_part(figure_and_part) -> None:
     of its spin-image matches alone, before any trilateration."""
     figure, used = figure_and_part
     a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
-    maps = part_hypothesis.hypothesis_maps(a, b, part_map.part_descriptors(a, b, Params()))
-    assert 1 <= len(maps) <= part_hypothesis.HYPOTHESES
+    descriptors = part_map.part_descriptors(a, b, Params())
+    maps = part_hypothesis.hypothesis_maps(a, b, descriptors, 2)
+    assert len(maps) == 2 and not np.array_equal(maps[0], maps[1])
     assert all(m.shape == used.shape and m.max() < len(figure.vertices) for m in maps)
     first = maps[0]
+    assert np.array_equal(part_hypothesis.hypothesis_maps(a, b, descriptors, 1)[0], first)
+    assert part_hypothesis.hypothesis_maps(a, b, descriptors, 0) == []
     assert (first >= 0).mean() >= 0.95
     assert right_share(figure, used, first) >= 0.9
     cloud = from_arrays(figure.vertices[used])
     with pytest.raises(ValueError, match="two meshes"):
-        part_hypothesis.hypothesis_maps(*prepare_pair(cloud, from_arrays(figure.vertices), 0, "auto"), (None, None))
+        part_hypothesis.hypothesis_maps(*prepare_pair(cloud, from_arrays(figure.vertices), 0, "auto"), (None, None), 1)

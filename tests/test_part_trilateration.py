@@ -29,22 +29,41 @@ def test_the_core_drops_the_anchor_whose_image_breaks_its_distances() -> None:
     assert part_trilateration.anchor_core(on_part, np.abs(position[:, None] - position[None]), 0.35, 0.05).all()
 
 
-def test_the_search_is_the_dense_argmin() -> None:
+def _dense_best(on_part, on_whole, reach, start):
+    """The dense search: every vertex of the whole costed, ties to ``start``, then to the
+    lowest vertex."""
+    found = start.copy()
+    for x in range(on_part.shape[1]):
+        near = np.flatnonzero(on_part[:, x] < reach)
+        if len(near) < part_trilateration.MIN_ANCHORS:
+            continue
+        cost = np.abs(on_whole[:, near] - on_part[near, x]).sum(axis=1)
+        if not np.isfinite(cost.min()) or (start[x] >= 0 and cost[start[x]] <= cost.min()):
+            continue
+        found[x] = np.argmin(cost)
+    return found
+
+
+@pytest.mark.parametrize("step", [0.0, 0.125], ids=["continuous", "ties"])
+def test_the_search_is_the_dense_argmin(step) -> None:
+    """Against the dense search, on random distances and on distances rounded to 1/8
+    (many exact ties, and sums exact in any order)."""
     rng = np.random.default_rng(0)
     n_anchors, n_part, n_whole, reach = 12, 60, 300, 0.5
     on_part = rng.uniform(0.0, 0.8, (n_anchors, n_part))
-    on_part[on_part >= reach] = np.inf
     on_whole = rng.uniform(0.0, 1.0, (n_whole, n_anchors))
+    if step:
+        on_part, on_whole = np.round(on_part / step) * step, np.round(on_whole / step) * step
+    on_part[on_part >= reach] = np.inf
     on_whole[rng.random(on_whole.shape) < 0.1] = np.inf  # beyond the whole's horizon
     start = rng.integers(-1, n_whole, n_part)
     found = part_trilateration.best_images(on_part, on_whole, reach, start)
-    for x in range(n_part):
-        near = np.flatnonzero(on_part[:, x] < reach)
-        if len(near) < part_trilateration.MIN_ANCHORS:
-            assert found[x] == start[x]
-            continue
-        cost = np.abs(on_whole[:, near] - on_part[near, x]).sum(axis=1)
-        assert found[x] == np.argmin(cost), x
+    assert np.array_equal(found, _dense_best(on_part, on_whole, reach, start))
+    # a vertex with no image that only infinite costs could locate keeps none
+    on_whole[:, 0] = np.inf
+    on_part[:, 0] = 0.1
+    alone = part_trilateration.best_images(on_part, on_whole, reach, np.full(n_part, -1))
+    assert alone[0] == -1 and np.array_equal(alone, _dense_best(on_part, on_whole, reach, np.full(n_part, -1)))
 
 
 def test_a_region_mapped_at_random_is_located_again(figure_and_part) -> None:

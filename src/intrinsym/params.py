@@ -355,10 +355,20 @@ class Params:
         "functional map (Rodola et al. 2017), and the vertex map of the two that changes "
         "fewer of the part's geodesic distances is kept, refined by ZoomOut and trilaterated "
         "from the anchors it keeps the distances of, each where that keeps more of them, "
-        "a trilaterated map refined once more (run.json: part_map)",
+        "a trilaterated map refined once more, and replaced by the map located from a "
+        "consistent cluster of spin-image matches where that keeps more still (run.json: part_map)",
         "global map",
         paper="off",
         off_flag="--no-part-fmap",
+        match_only=True,
+    )
+    part_hypotheses: int = _p(
+        1,
+        "with part_fmap, the hypotheses drawn from consistent clusters of spin-image matches "
+        "(game-theoretic matching) and weighed against the part's kept map: each costs "
+        "3.5-7 s on a SHREC'16 pair on two cores; 0 draws none",
+        "global map",
+        paper="0",
         match_only=True,
     )
 
@@ -379,6 +389,7 @@ class Params:
             (self.target_spacing is not None and self.target_spacing <= 0, "target_spacing must be positive"),
             (self.seed < 0, "seed must be at least 0"),
             (self.refine_anchors < 0, "refine_anchors must be at least 0"),
+            (self.part_hypotheses < 0, "part_hypotheses must be at least 0"),
             (not 2 <= self.spin_bins <= MAX_SPIN_BINS, f"spin_bins must lie in [2, {MAX_SPIN_BINS}]"),
             (not 1 <= self.spin_cloud <= MAX_SPIN_CLOUD, f"spin_cloud must lie in [1, {MAX_SPIN_CLOUD}]"),
             (self.spin_radius <= 0, "spin_radius must be positive"),
@@ -474,6 +485,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         refine_anchors=0,
         smooth_map=False,
         part_fmap=False,
+        part_hypotheses=0,
         passes=1,
         trivial_weight=0.0,
     ),

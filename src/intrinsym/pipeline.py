@@ -590,8 +590,11 @@ def match(
     (:func:`~intrinsym.globalmap.part_map.refine_part_map`), then trilaterated from
     the anchors on which it keeps A's distances where that keeps more of them still
     (:func:`~intrinsym.globalmap.part_trilateration.trilaterated_maps`) and refined by
-    ZoomOut once more (:func:`~intrinsym.globalmap.part_map.with_polish`; ``run.json``:
-    ``part_map``; the stage ``part map``, 6-15 s on the SHREC'16 shapes on a 2-core
+    ZoomOut once more (:func:`~intrinsym.globalmap.part_map.with_polish`), and replaced
+    by the map located from a consistent cluster of spin-image matches
+    (:func:`~intrinsym.globalmap.part_hypothesis.hypothesis_maps`), trilaterated and
+    polished, where that keeps more of them than the map kept so far (``run.json``:
+    ``part_map``; the stage ``part map``, 9-22 s on the SHREC'16 shapes on a 2-core
     machine). The share of A's short distances the
     kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
@@ -697,8 +700,10 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     :func:`refine_part_map` where that changes fewer of the part's distances
     (:func:`refined_if_less_distorted`), then by the least distorted round of
     :func:`trilaterated_maps` where that changes fewer still
-    (:func:`trilaterated_if_less_distorted`) and then refined once more (:func:`with_polish`);
-    ``info.part_map``); with ``p.part_fmap`` off or
+    (:func:`trilaterated_if_less_distorted`) and then refined once more (:func:`with_polish`),
+    then by the hypothesis located from a consistent cluster of descriptor matches
+    (:func:`hypothesis_maps`), trilaterated and polished, where that changes fewer
+    (:func:`hypothesis_if_less_distorted`); ``info.part_map``); with ``p.part_fmap`` off or
     a point cloud, the extraction's map as it is, measured. The partial functional map and the
     refinement are solved on the two meshes as given (``shapes``, the part and the whole,
     prepared again without refinement when either was refined)."""
@@ -719,7 +724,7 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
         image = refine_part_map(located, *given)
         stats = with_polish(image, part, whole, stats)
     polished = []
-    for seed in hypothesis_maps(*given, descriptors):
+    for seed in hypothesis_maps(*given, descriptors, p.part_hypotheses):
         rounds = trilaterated_maps(seed, *given)
         if rounds:
             polished.append(refine_part_map(rounds[least_distorted(rounds, part, whole)[0]], *given))

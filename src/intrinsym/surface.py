@@ -92,6 +92,17 @@ class Surface:
         return points * self.scale + self.center
 
     @cached_property
+    def chord_graph(self) -> Any:
+        """The working mesh's edges and the shortcut chords across them
+        (:func:`~intrinsym.geodesics.geodesics.surface_graph` with ``rings=1``), built once:
+        a part's trilaterations and hypotheses measure their distances on it (``graph``'s
+        longer chords cut across a coarse mesh's thin limbs, differently on two meshes).
+        A mesh's only; a point cloud has ``graph`` alone."""
+        if self.shape.faces is None:
+            raise ValueError("a point cloud has no mesh edges to chord")
+        return geodesics.surface_graph(self.shape.vertices, self.shape.faces, rings=1)
+
+    @cached_property
     def _input_tree(self) -> cKDTree:
         # built once: a detect asks for nearest input vertices nine times
         return cKDTree(self.input_vertices)

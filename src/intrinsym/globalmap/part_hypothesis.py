@@ -30,14 +30,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..geodesics.geodesics import distances_from, surface_graph
+from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
 from ..surface import Surface
 from .part_map import PART_MAP_CHANGE
 from .part_trilateration import MIN_ANCHORS, TRILATERATION_ANCHORS, TRILATERATION_REACH, best_images
 
 __all__ = [
-    "HYPOTHESES",
     "HYPOTHESIS_CANDIDATES",
     "HYPOTHESIS_SAMPLES",
     "consistent_matches",
@@ -50,8 +49,6 @@ __all__ = [
 HYPOTHESIS_SAMPLES = 1000
 #: Each anchor's candidate images: the whole's samples nearest it in descriptor space.
 HYPOTHESIS_CANDIDATES = 16
-#: Hypotheses drawn, each from the matches the ones before left (set once, not tuned).
-HYPOTHESES = 1
 #: A match whose geodesic distances differ by more than this many ``PART_MAP_CHANGE``
 #: pays nothing (the Gaussian's tail left out of the sparse payoff matrix).
 PAYOFF_CUTOFF = 3.0
@@ -186,7 +183,7 @@ def _cluster(population: np.ndarray) -> np.ndarray:
 
 
 def hypothesis_maps(
-    part: Surface, whole: Surface, descriptors: tuple[np.ndarray, np.ndarray], count: int = HYPOTHESES
+    part: Surface, whole: Surface, descriptors: tuple[np.ndarray, np.ndarray], count: int
 ) -> list[np.ndarray]:
     """Maps of a part into its whole located from consistent clusters of descriptor matches.
 
@@ -204,7 +201,9 @@ def hypothesis_maps(
     descriptors : (N_part_working, D) and (N_whole_working, D) float
         :func:`intrinsym.globalmap.part_map.part_descriptors`.
     count : int
-        Hypotheses to draw.
+        Hypotheses to draw (``Params.part_hypotheses``, 1 by default: on 50 SHREC'16
+        pairs, the 36 worst and best of round 41 among them, one took the share within
+        0.10 from 0.672 to 0.828, two to 0.835, three to 0.849, each 3.5-7 s more on the 2-core machine).
 
     Returns
     -------
@@ -225,7 +224,7 @@ def hypothesis_maps(
     nearest = np.argsort(gaps, axis=1, kind="stable")[:, :k]
     anchor_of = np.repeat(np.arange(len(anchors)), k)
     target_of = samples[nearest.ravel()]
-    part_graph, whole_graph = (surface_graph(s.shape.vertices, s.shape.faces, rings=1) for s in (part, whole))
+    part_graph, whole_graph = part.chord_graph, whole.chord_graph
     on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
     targets, row = np.unique(target_of, return_inverse=True)
     # a pair pays nothing beyond this distance on the whole

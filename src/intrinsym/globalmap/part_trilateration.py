@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ..geodesics.geodesics import distances_from, surface_graph
+from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
 from ..surface import Surface
 from .part_map import PART_MAP_CHANGE
@@ -99,9 +99,12 @@ def best_images(part_distances, whole_distances, reach, start):  # pragma: no co
 
     Per part vertex, the whole's vertex whose distances to the anchors' images best
     repeat (least sum of absolute differences) the vertex's distances to the anchors
-    within ``reach``; ``start`` (-1: none) where fewer than MIN_ANCHORS are. The sum runs
-    over the nearest anchors first and stops once it exceeds the best so far, which the
-    start's own sum bounds from the outset."""
+    within ``reach``; ``start`` (-1: none) where fewer than MIN_ANCHORS are. Ties go to
+    ``start``, then to the lowest vertex: the dense argmin's answer. The sum runs over the
+    nearest anchors first and stops once it exceeds the best so far, which the start's
+    own sum bounds from the outset. (Visiting the whole's vertices in the order of the
+    first term's difference instead, to stop early, took 0.66-1.26x as long on
+    holes_dog_shape_9's four searches: with 6-24 anchors within reach, that bound is weak.)"""
     n_anchors, n_part = part_distances.shape
     n_whole = whole_distances.shape[0]
     out = start.copy()
@@ -169,7 +172,7 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> 
     mapped = np.flatnonzero(image >= 0)
     if len(mapped) < TRILATERATION_ANCHORS:
         return []
-    part_graph, whole_graph = (surface_graph(s.shape.vertices, s.shape.faces, rings=1) for s in (part, whole))
+    part_graph, whole_graph = part.chord_graph, whole.chord_graph
     anchors = mapped[farthest_point_sampling(part.shape.vertices[mapped], TRILATERATION_ANCHORS)]
     on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
     whole_inputs = whole.nearest_input_vertex(whole.shape.vertices)
