@@ -100,8 +100,8 @@ PARTIAL_CALIBRATION = (
 #: marginals are nearly flat and do not rank its images, but a map that keeps the
 #: part's distances is right on most of it, one that tears them on little.
 PART_CALIBRATION = (
-    0.127, 0.127, 0.127, 0.127, 0.127, 0.127, 0.127, 0.127, 0.127, 0.127,
-    0.127, 0.127, 0.144, 0.162, 0.234, 0.234, 0.437, 0.592, 0.662, 0.888,
+    0.076, 0.076, 0.076, 0.076, 0.076, 0.076, 0.076, 0.076, 0.076, 0.076,
+    0.076, 0.076, 0.076, 0.076, 0.076, 0.201, 0.370, 0.597, 0.693, 0.886,
 )  # fmt: skip
 
 
