@@ -28,19 +28,8 @@ from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
 from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
-from .globalmap.part_hypothesis import hypothesis_maps
-from .globalmap.part_map import (
-    choose_part_map,
-    hypothesis_if_less_distorted,
-    least_distorted,
-    part_descriptors,
-    part_fmap_map,
-    refine_part_map,
-    refined_if_less_distorted,
-    trilaterated_if_less_distorted,
-    with_polish,
-)
-from .globalmap.part_trilateration import trilaterated_maps
+from .globalmap.part_chain import part_vertex_map
+from .globalmap.part_map import choose_part_map
 from .globalmap.vertex_maps import inverse_vertex_map
 from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
@@ -695,42 +684,16 @@ def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarr
 
 
 def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[Shape, Shape], p: Params) -> Result:
-    """A part's match to its whole with the vertex map :func:`choose_part_map` keeps
-    (``global_map``: the partial functional map's or the extraction's, refined by
-    :func:`refine_part_map` where that changes fewer of the part's distances
-    (:func:`refined_if_less_distorted`), then by the least distorted round of
-    :func:`trilaterated_maps` where that changes fewer still
-    (:func:`trilaterated_if_less_distorted`) and then refined once more (:func:`with_polish`),
-    then by the hypothesis located from a consistent cluster of descriptor matches
-    (:func:`hypothesis_maps`), trilaterated and polished, where that changes fewer
-    (:func:`hypothesis_if_less_distorted`); ``info.part_map``); with ``p.part_fmap`` off or
-    a point cloud, the extraction's map as it is, measured. The partial functional map and the
+    """A part's match to its whole with the vertex map :func:`part_vertex_map` keeps
+    (``global_map``, ``info.part_map``); with ``p.part_fmap`` off or a point cloud, the
+    extraction's map as it is, measured. The partial functional map and the
     refinement are solved on the two meshes as given (``shapes``, the part and the whole,
     prepared again without refinement when either was refined)."""
     if not (p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None):
         _, stats = choose_part_map(result.symmetry_map(), part, whole)
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
     given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
-    extraction_map = result.symmetry_map()
-    descriptors = part_descriptors(*given, p)
-    image, stats = choose_part_map(extraction_map, part, whole, part_fmap_map(*given, descriptors))
-    refined = refine_part_map(extraction_map if image is None else image, *given)
-    better, stats = refined_if_less_distorted(refined, part, whole, stats)
-    if better:
-        image = refined
-    kept = extraction_map if image is None else image
-    located, stats = trilaterated_if_less_distorted(trilaterated_maps(kept, *given), part, whole, stats)
-    if located is not None:
-        image = refine_part_map(located, *given)
-        stats = with_polish(image, part, whole, stats)
-    polished = []
-    for seed in hypothesis_maps(*given, descriptors, p.part_hypotheses):
-        rounds = trilaterated_maps(seed, *given)
-        if rounds:
-            polished.append(refine_part_map(rounds[least_distorted(rounds, part, whole)[0]], *given))
-    hypothesis, stats = hypothesis_if_less_distorted(polished, part, whole, stats)
-    if hypothesis is not None:
-        image = hypothesis
+    image, stats = part_vertex_map(result.symmetry_map(), part, whole, given, p)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 

@@ -103,6 +103,12 @@ class Surface:
         return geodesics.surface_graph(self.shape.vertices, self.shape.faces, rings=1)
 
     @cached_property
+    def working_inputs(self) -> np.ndarray:
+        """The input vertex nearest every working vertex, (N_working,) int64, found once
+        (a part's match maps between input vertices a dozen times)."""
+        return self.nearest_input_vertex(self.shape.vertices)
+
+    @cached_property
     def _input_tree(self) -> cKDTree:
         # built once: a detect asks for nearest input vertices nine times
         return cKDTree(self.input_vertices)

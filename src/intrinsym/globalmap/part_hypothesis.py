@@ -34,7 +34,7 @@ from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
 from ..surface import Surface
 from .part_map import PART_MAP_CHANGE
-from .part_trilateration import MIN_ANCHORS, TRILATERATION_ANCHORS, TRILATERATION_REACH, best_images
+from .part_trilateration import MIN_ANCHORS, TRILATERATION_ANCHORS, TRILATERATION_REACH, best_images, input_map
 
 __all__ = [
     "HYPOTHESIS_CANDIDATES",
@@ -240,7 +240,6 @@ def hypothesis_maps(
         TRILATERATION_REACH,
         PART_MAP_CHANGE,
     )
-    whole_inputs = whole.nearest_input_vertex(vertices_w)
     alive = np.ones(len(anchor_of), dtype=bool)
     maps = []
     for _ in range(count):
@@ -256,5 +255,5 @@ def hypothesis_maps(
         images = distances_from(whole_graph, target_of[chosen], limit=2.0 * TRILATERATION_REACH)
         start = np.full(len(vertices_p), -1, dtype=np.int64)
         located = best_images(on_part[anchor_of[chosen]], np.ascontiguousarray(images.T), TRILATERATION_REACH, start)
-        maps.append(np.where(located >= 0, whole_inputs[np.maximum(located, 0)], -1)[part.vertex_map])
+        maps.append(input_map(located, part, whole))
     return maps

@@ -204,7 +204,7 @@ def part_fmap_map(part: Surface, whole: Surface, descriptors: tuple[np.ndarray, 
     evals_w, evecs_w, mass_w = _spectrum(whole)
     pair = (evals_w, evecs_w, mass_w, whole.shape.vertices, whole.shape.faces)
     images = partial_functional_map(_spectrum(part), pair, descriptors).images
-    return _working_inputs(whole)[images[part.vertex_map]]
+    return whole.working_inputs[images[part.vertex_map]]
 
 
 def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np.ndarray:
@@ -233,7 +233,7 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     """
     if part.shape.faces is None or whole.shape.faces is None:
         raise ValueError("refining a part's map needs two meshes, not point clouds")
-    image = np.asarray(vertex_map, dtype=np.int64)[_working_inputs(part)]
+    image = np.asarray(vertex_map, dtype=np.int64)[part.working_inputs]
     mapped = image >= 0
     if not mapped.any():
         return np.asarray(vertex_map, dtype=np.int64)
@@ -244,7 +244,7 @@ def refine_part_map(vertex_map: np.ndarray, part: Surface, whole: Surface) -> np
     # as in partial_functional_map: OpenBLAS's threads slow these (N, 100) products down
     with threadpool_limits(1, user_api="blas"):
         refined = restricted_zoomout(seed, _eigenpairs(part), _eigenpairs(whole), keep)
-    return _working_inputs(whole)[refined[part.vertex_map]]
+    return whole.working_inputs[refined[part.vertex_map]]
 
 
 def refined_if_less_distorted(
@@ -276,7 +276,7 @@ def refined_if_less_distorted(
     stats : PartMapStats
         ``stats`` with the refinement's share in ``distortion`` and ``refined`` set.
     """
-    distortion, better = _weighed("refined", _changed(refined_map, _working_inputs(part), part, whole), stats)
+    distortion, better = _weighed("refined", _changed(refined_map, part, whole), stats)
     return better, dataclasses.replace(stats, distortion=distortion, refined=better)
 
 
@@ -328,8 +328,7 @@ def least_distorted(maps: list[np.ndarray], part: Surface, whole: Surface) -> tu
         Its share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance it
         changes by more than ``PART_MAP_CHANGE``; ``inf`` where no map gives an image.
     """
-    from_inputs = _working_inputs(part)
-    shares = np.array([_changed(m, from_inputs, part, whole) for m in maps])
+    shares = np.array([_changed(m, part, whole) for m in maps])
     shares[~np.isfinite(shares)] = np.inf
     best = int(np.argmin(shares))
     return best, float(shares[best])
@@ -396,7 +395,7 @@ def with_polish(polished_map: np.ndarray, part: Surface, whole: Surface, stats: 
     """
     if not stats.trilaterated:
         raise ValueError("only a trilaterated map is polished")
-    distortion = _recorded("polished", _changed(polished_map, _working_inputs(part), part, whole), stats)
+    distortion = _recorded("polished", _changed(polished_map, part, whole), stats)
     return dataclasses.replace(stats, distortion=distortion, polished=True)
 
 
@@ -412,18 +411,12 @@ def _weighed(name: str, share: float, stats: PartMapStats) -> tuple[dict[str, fl
     return _recorded(name, share, stats), bool(np.isfinite(share) and (kept is None or share < kept))
 
 
-def _changed(input_map: np.ndarray, from_inputs: np.ndarray, part: Surface, whole: Surface) -> float:
+def _changed(input_map: np.ndarray, part: Surface, whole: Surface) -> float:
     """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance a
-    map of input vertices changes by more than ``PART_MAP_CHANGE`` (NaN: no image);
-    ``from_inputs`` is ``_working_inputs(part)``."""
-    image = np.asarray(input_map, dtype=np.int64)[from_inputs]
+    map of input vertices changes by more than ``PART_MAP_CHANGE`` (NaN: no image)."""
+    image = np.asarray(input_map, dtype=np.int64)[part.working_inputs]
     working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
     return float(graph_map_distortion(working, part.graph, whole.graph, PART_MAP_RADIUS).above(PART_MAP_CHANGE))
-
-
-def _working_inputs(surface: Surface) -> np.ndarray:
-    """The input vertex nearest every working vertex, (N_working,) int64."""
-    return surface.nearest_input_vertex(surface.shape.vertices)
 
 
 def choose_part_map(
@@ -451,8 +444,7 @@ def choose_part_map(
     maps = {"extraction": extraction_map}
     if fmap_map is not None:
         maps["partial_fmap"] = fmap_map
-    from_inputs = _working_inputs(part)
-    shares = {name: _changed(input_map, from_inputs, part, whole) for name, input_map in maps.items()}
+    shares = {name: _changed(input_map, part, whole) for name, input_map in maps.items()}
     distortion = {name: (float(s) if np.isfinite(s) else None) for name, s in shares.items()}
     if fmap_map is None:
         return None, PartMapStats("extraction", distortion)

@@ -33,6 +33,7 @@ __all__ = [
     "TRILATERATION_ROUNDS",
     "anchor_core",
     "best_images",
+    "input_map",
     "trilaterated_maps",
 ]
 
@@ -137,6 +138,12 @@ def best_images(part_distances, whole_distances, reach, start):  # pragma: no co
     return out
 
 
+def input_map(working: np.ndarray, part: Surface, whole: Surface) -> np.ndarray:
+    """A map between working vertices, (N_part_working,) int (-1: none), as input
+    vertex of the whole of every input vertex of the part, (N_part_input,) int64."""
+    return np.where(working >= 0, whole.working_inputs[np.maximum(working, 0)], -1)[part.vertex_map]
+
+
 def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> list[np.ndarray]:
     """A part's map into its whole trilaterated from its anchor core, round after round.
 
@@ -168,14 +175,13 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> 
     """
     if part.shape.faces is None or whole.shape.faces is None:
         raise ValueError("trilaterating a part's map needs two meshes, not point clouds")
-    image = np.asarray(vertex_map, dtype=np.int64)[part.nearest_input_vertex(part.shape.vertices)]
+    image = np.asarray(vertex_map, dtype=np.int64)[part.working_inputs]
     mapped = np.flatnonzero(image >= 0)
     if len(mapped) < TRILATERATION_ANCHORS:
         return []
     part_graph, whole_graph = part.chord_graph, whole.chord_graph
     anchors = mapped[farthest_point_sampling(part.shape.vertices[mapped], TRILATERATION_ANCHORS)]
     on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
-    whole_inputs = whole.nearest_input_vertex(whole.shape.vertices)
     working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
     on_whole = np.empty((len(anchors), len(whole.shape.vertices)))
     images = np.full(len(anchors), -1)
@@ -189,5 +195,5 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> 
         on_whole[moved] = distances_from(whole_graph, images[moved], limit=2.0 * TRILATERATION_REACH)
         core = anchor_core(on_part[:, anchors], on_whole[:, images], TRILATERATION_REACH, PART_MAP_CHANGE)
         working = best_images(on_part[core], np.ascontiguousarray(on_whole[core].T), TRILATERATION_REACH, working)
-        maps.append(np.where(working >= 0, whole_inputs[np.maximum(working, 0)], -1)[part.vertex_map])
+        maps.append(input_map(working, part, whole))
     return maps
