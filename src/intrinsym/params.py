@@ -371,6 +371,17 @@ class Params:
         paper="0",
         match_only=True,
     )
+    self_hypotheses: int = _p(
+        1,
+        "where detect finds no global symmetry on a mesh, the hypotheses drawn from consistent clusters of "
+        "spin-image self-matches (trivial matches left out), weighed against the extraction's map: each map "
+        "is cut to -1 where it does not keep the distances around a vertex, and of those whose images look "
+        "like their vertices the one mapping the most vertices is kept: each costs 2-9 s on a SHREC'16 shape "
+        "on two cores; 0 draws none and keeps the extraction's map",
+        "global map",
+        paper="0",
+        self_match=True,
+    )
 
     def __post_init__(self) -> None:
         for name, value in _choices().items():
@@ -390,6 +401,7 @@ class Params:
             (self.seed < 0, "seed must be at least 0"),
             (self.refine_anchors < 0, "refine_anchors must be at least 0"),
             (self.part_hypotheses < 0, "part_hypotheses must be at least 0"),
+            (self.self_hypotheses < 0, "self_hypotheses must be at least 0"),
             (not 2 <= self.spin_bins <= MAX_SPIN_BINS, f"spin_bins must lie in [2, {MAX_SPIN_BINS}]"),
             (not 1 <= self.spin_cloud <= MAX_SPIN_CLOUD, f"spin_cloud must lie in [1, {MAX_SPIN_CLOUD}]"),
             (self.spin_radius <= 0, "spin_radius must be positive"),
@@ -486,6 +498,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         smooth_map=False,
         part_fmap=False,
         part_hypotheses=0,
+        self_hypotheses=0,
         passes=1,
         trivial_weight=0.0,
     ),

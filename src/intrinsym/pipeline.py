@@ -30,6 +30,7 @@ from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
 from .globalmap.part_chain import part_vertex_map
 from .globalmap.part_map import choose_part_map
+from .globalmap.self_hypothesis import self_symmetry_map
 from .globalmap.vertex_maps import inverse_vertex_map
 from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
@@ -526,6 +527,18 @@ def detect(
     Returns
     -------
     Result
+
+    Notes
+    -----
+    Where no global symmetry is found on a mesh (a shape with a side cut away or holes),
+    the symmetry map (``global_map``) is the partial one
+    :func:`~intrinsym.globalmap.self_hypothesis.self_symmetry_map` keeps: of the
+    extraction's map and ``params.self_hypotheses`` maps located from consistent clusters
+    of spin-image self-matches, each with -1 where it changes the distances to the
+    anchors around a vertex by more than ``SELF_RESIDUAL`` ("no partner"), the one that
+    maps the most vertices among those whose images look like their vertices (median
+    likeness rank at most ``SELF_LIKENESS``), else -1 everywhere (``run.json``:
+    ``self_map``; the stage ``self map``).
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
     check_machine(p)
@@ -547,7 +560,15 @@ def detect(
     ps, pt = sample_pair(surf, surf, p)
     clock.lap("sampling")
     header = {"mode": "detect", "input": str(surf.shape.path), "preset": preset}
-    return _solve(sampled(surf, surf, ps, pt, p, True), p, clock, header)
+    result = _solve(sampled(surf, surf, ps, pt, p, True), p, clock, header)
+    if result.global_map is not None or not p.self_hypotheses or surf.shape.faces is None:
+        return result
+    # a Surface given keeps only its working mesh: the hypotheses are solved on that
+    given = surf if isinstance(shape, Surface) or serves(surf, 0) else prepare_surface(s, 0)
+    image, stats = self_symmetry_map(result.symmetry_map(), given, p, p.self_hypotheses)
+    clock.lap("self map")
+    info = dataclasses.replace(result.info, seconds=dict(clock.seconds), self_map=stats)
+    return dataclasses.replace(result, global_map=image, info=info)
 
 
 def match(

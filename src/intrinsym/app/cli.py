@@ -228,6 +228,7 @@ def _summary(result: Result, out: Path) -> dict:
         "files": [f for f in Result.FILES if (out / f).is_file()],
         "global_confidence": saved_global_confidence(out, result.global_symmetry is not None),
         "identity": None if info.identity is None else dataclasses.asdict(info.identity),
+        "self_map": None if info.self_map is None else dataclasses.asdict(info.self_map),
         "modes": _modes_summary(result, out),
     }
 
@@ -260,6 +261,9 @@ def _print_summary(s: dict) -> None:
             f"{'its' if i['wider_kept'] else 'the first'} map kept (mean local distortion {second}, first "
             f"{i['distortion']:.4f})"
         )
+    if (sm := s.get("self_map")) is not None:
+        shares = ", ".join(f"{name} {share:.2f}" for name, share in sm["mapped"].items())
+        print(f"no global symmetry: the partial symmetry map is {sm['source']} (vertices mapped: {shares})")
     if (m := s.get("modes")) is not None:
         source = "the target's symmetry" if m["second_from"] == "target_symmetry" else "the marginals"
         state = "both answers stand" if m["both"] else "one answer"

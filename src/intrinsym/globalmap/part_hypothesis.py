@@ -183,7 +183,7 @@ def _cluster(population: np.ndarray) -> np.ndarray:
 
 
 def hypothesis_maps(
-    part: Surface, whole: Surface, descriptors: tuple[np.ndarray, np.ndarray], count: int
+    part: Surface, whole: Surface, descriptors: tuple[np.ndarray, np.ndarray], count: int, trivial: float = 0.0
 ) -> list[np.ndarray]:
     """Maps of a part into its whole located from consistent clusters of descriptor matches.
 
@@ -206,6 +206,11 @@ def hypothesis_maps(
         0.10 from 0.672 to 0.828, two to 0.835, three to 0.849, each 3.5-7 s more on the 2-core
         machine; over all 125 pairs two reach 0.890 against one's 0.893: the distortion
         test that weighs them chooses a wrong one as often as a right one).
+    trivial : float
+        A shape matched to itself (``part`` and ``whole`` one surface): candidates within
+        this distance of their anchor are left out, else the identity is the largest
+        consistent cluster (graph length units, below ``TRILATERATION_REACH``; 0 for two
+        shapes).
 
     Returns
     -------
@@ -217,17 +222,21 @@ def hypothesis_maps(
     """
     if part.shape.faces is None or whole.shape.faces is None:
         raise ValueError("a part's hypotheses need two meshes, not point clouds")
+    if not 0.0 <= trivial < TRILATERATION_REACH:
+        raise ValueError(f"trivial must lie in [0, {TRILATERATION_REACH}), got {trivial}")
     d_part, d_whole = descriptors
     vertices_p, vertices_w = part.shape.vertices, whole.shape.vertices
     anchors = farthest_point_sampling(vertices_p, min(TRILATERATION_ANCHORS, len(vertices_p)))
     samples = farthest_point_sampling(vertices_w, min(HYPOTHESIS_SAMPLES, len(vertices_w)))
     k = min(HYPOTHESIS_CANDIDATES, len(samples))
     gaps = np.linalg.norm(d_part[anchors][:, None, :] - d_whole[samples][None, :, :], axis=2)
+    part_graph, whole_graph = part.chord_graph, whole.chord_graph
+    on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
+    if trivial > 0.0:
+        gaps[on_part[:, samples] < trivial] = np.inf
     nearest = np.argsort(gaps, axis=1, kind="stable")[:, :k]
     anchor_of = np.repeat(np.arange(len(anchors)), k)
     target_of = samples[nearest.ravel()]
-    part_graph, whole_graph = part.chord_graph, whole.chord_graph
-    on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
     targets, row = np.unique(target_of, return_inverse=True)
     # a pair pays nothing beyond this distance on the whole
     horizon = TRILATERATION_REACH + PAYOFF_CUTOFF * PART_MAP_CHANGE

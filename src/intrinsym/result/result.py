@@ -191,7 +191,9 @@ class Result:
 
         The global map the run chose (``global_map``,
         :func:`intrinsym.globalmap.globalmap.choose_global_map`; a whole matched to its
-        part: the part's match inverted, -1 where it has no counterpart) when it made one,
+        part: the part's match inverted, -1 where it has no counterpart; a shape without
+        a global symmetry: the partial map
+        :func:`intrinsym.globalmap.self_hypothesis.self_symmetry_map` kept, ``info.self_map``) when it made one,
         else the extraction's (:func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`). Needs ``support``
         and ``extraction``.
         """
@@ -307,13 +309,15 @@ class Result:
         """The one calibration table every vertex of :meth:`symmetry_map` takes, or None
         (the tables of ``CALIBRATION`` by local distortion): ``PART_CALIBRATION`` for a
         part matched to its whole (``info.part``), ``PARTIAL_CALIBRATION`` for a partial
-        symmetry's map of a shape onto itself (no global map; the dominant symmetry
-        partial)."""
+        symmetry's map of a shape onto itself (no global map and the dominant symmetry
+        partial, or the map ``info.self_map`` kept)."""
         if self.info.part:
             return PART_CALIBRATION
         sym = None if self.extraction is None else self.extraction.dominant_symmetry
         self_match = self.support is not None and self.support.self_match
-        if self.global_map is None and self_match and sym is not None and sym.kind == "partial":
+        if self.info.self_map is not None or (
+            self.global_map is None and self_match and sym is not None and sym.kind == "partial"
+        ):
             return PARTIAL_CALIBRATION
         return None
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..globalmap.part_map import PartMapStats
+from ..globalmap.self_hypothesis import SelfMapStats
 
 #: Version of the result folder's format (``run.json``'s ``format_version``).
 FORMAT_VERSION = 5
@@ -259,6 +260,10 @@ class RunInfo:
         Match with ``part``: which of the part's vertex maps was kept and how much each
         changes the part's distances (for a whole matched to its part, the part's
         extraction map the result inverts); the score of the confidence.
+    self_map : SelfMapStats or None
+        Detect without a global symmetry (a mesh, ``self_hypotheses`` at least 1): which
+        partial symmetry map was kept (``global_map``) and how much of the shape each
+        candidate maps.
     """
 
     mode: str
@@ -277,6 +282,7 @@ class RunInfo:
     part: bool = False
     target_part: bool = False
     part_map: PartMapStats | None = None
+    self_map: SelfMapStats | None = None
 
     @property
     def no_partner(self) -> bool:
@@ -308,6 +314,7 @@ class RunInfo:
         zoomout = run.get("zoomout")
         global_map = run.get("global_map")
         part_map = run.get("part_map")
+        self_map = run.get("self_map")
         return cls(
             mode=run["mode"],
             input=run["input"],
@@ -325,6 +332,7 @@ class RunInfo:
             part=bool(run.get("part", False)),
             target_part=bool(run.get("target_part", False)),
             part_map=PartMapStats(**part_map) if part_map else None,
+            self_map=SelfMapStats(**self_map) if self_map else None,
         )
 
 
