@@ -124,6 +124,8 @@ def leave_one_class_out(rows: list[dict]) -> tuple[list[dict], np.ndarray, np.nd
         for r in test:
             c = np.asarray(r["reliability"]["count"], dtype=np.float64)
             w = np.asarray(r["reliability"]["within_0.05"], dtype=np.float64)
+            if not c.sum():  # a map that gives no scored vertex an image: nothing to be sure of
+                continue
             shapes.append((r["shape"], float((calib * c).sum() / c.sum()), float(w.sum() / c.sum())))
         out.append(
             {

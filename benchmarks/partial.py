@@ -8,7 +8,9 @@ balance (mean of the first and the third) and the IoU of the best-ranked symmetr
 parts with the truth's partnered vertices; two diagnostics: where the map gives an
 unpartnered vertex an image, the share of those images that are unpartnered themselves,
 and (cached, not tabulated) ``map_kept``, the share of the shape's short distances the
-map keeps (what a part's match calibrates its confidence on). Beside it, two baselines: "no partner
+map keeps (what a part's match calibrates its confidence on), and ``self_map`` with
+``self_map_seconds``, which partial symmetry map ``detect`` kept without a global
+symmetry (``run.json``'s record) and what it cost. Beside it, two baselines: "no partner
 anywhere" (every vertex -1) and the peer a user would pick, pyFM's orientation-reversing
 self-map (PyPI ``pyfmaps``: WKS, ``fit(w_orient=1, orient_reversing=True)``, ZoomOut
 20 -> 100), which maps every vertex. Command::
@@ -31,6 +33,7 @@ Output: one Markdown table, a row per shape, then the mean and worst rows per ki
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -131,6 +134,9 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         # recorded to see whether it also tells a right self-map from a wrong one
         kept = distortion.map_distortion(vmap, shape, part_map.PART_MAP_RADIUS).above(part_map.PART_MAP_CHANGE)
         row["map_kept"] = 1.0 - kept if np.isfinite(kept) else None
+        # which partial symmetry map detect kept without a global symmetry, and its cost
+        row["self_map"] = None if result.info.self_map is None else dataclasses.asdict(result.info.self_map)
+        row["self_map_seconds"] = result.info.seconds.get("self map")
     # where the unpartnered vertices the map gives an image are sent: onto the unpartnered
     # remains themselves (a self-map of what has no partner) or onto the partnered rest
     sent = vmap[truth.unpartnered & (vmap >= 0)]
