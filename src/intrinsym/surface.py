@@ -155,6 +155,20 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
     )
 
 
+def working_map(vertex_map: np.ndarray, source: Surface, target: Surface) -> np.ndarray:
+    """A map between input vertices, (N_source_input,) int (-1: none), as working vertex
+    of ``target`` of every working vertex of ``source`` (each takes its nearest input
+    vertex's image), (N_source_working,) int64; :func:`input_map` goes back."""
+    image = np.asarray(vertex_map, dtype=np.int64)[source.working_inputs]
+    return np.where(image >= 0, target.vertex_map[np.maximum(image, 0)], -1)
+
+
+def input_map(working: np.ndarray, source: Surface, target: Surface) -> np.ndarray:
+    """A map between working vertices, (N_source_working,) int (-1: none), as input
+    vertex of ``target`` of every input vertex of ``source``, (N_source_input,) int64."""
+    return np.where(working >= 0, target.working_inputs[np.maximum(working, 0)], -1)[source.vertex_map]
+
+
 def serves(surface: Surface, min_vertices: int) -> bool:
     """Whether ``surface`` is what :func:`prepare` gives for ``min_vertices``: it was
     prepared for that size, or it needed no subdivision and has at least that many

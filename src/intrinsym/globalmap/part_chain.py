@@ -20,7 +20,6 @@ from .part_map import (
     PartMapStats,
     choose_part_map,
     hypothesis_if_less_distorted,
-    least_distorted,
     part_descriptors,
     part_fmap_map,
     refine_part_map,
@@ -28,7 +27,7 @@ from .part_map import (
     trilaterated_if_less_distorted,
     with_polish,
 )
-from .part_trilateration import trilaterated_maps
+from .part_trilateration import polished_trilateration, trilaterated_maps
 
 __all__ = ["part_vertex_map"]
 
@@ -68,10 +67,10 @@ def part_vertex_map(
     if located is not None:
         image = refine_part_map(located, *given)
         stats = with_polish(image, part, whole, stats)
-    polished = []
-    for seed in hypothesis_maps(*given, descriptors, p.part_hypotheses):
-        rounds = trilaterated_maps(seed, *given)
-        if rounds:
-            polished.append(refine_part_map(rounds[least_distorted(rounds, part, whole)[0]], *given))
+    finished = (
+        polished_trilateration(seed, given, (part, whole))
+        for seed in hypothesis_maps(*given, descriptors, p.part_hypotheses)
+    )
+    polished = [m for m in finished if m is not None]
     hypothesis, stats = hypothesis_if_less_distorted(polished, part, whole, stats)
     return (image if hypothesis is None else hypothesis), stats

@@ -32,9 +32,9 @@ import scipy.sparse as sp
 
 from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
-from ..surface import Surface
+from ..surface import Surface, input_map
 from .part_map import PART_MAP_CHANGE
-from .part_trilateration import MIN_ANCHORS, TRILATERATION_ANCHORS, TRILATERATION_REACH, best_images, input_map
+from .part_trilateration import MIN_ANCHORS, TRILATERATION_ANCHORS, TRILATERATION_REACH, best_images
 
 __all__ = [
     "HYPOTHESIS_CANDIDATES",

@@ -25,7 +25,7 @@ from threadpoolctl import threadpool_limits
 from ..mesh.sampling import area_uniform_points
 from ..params import Params
 from ..spectral import laplacian
-from ..surface import Surface
+from ..surface import Surface, working_map
 from ..unary.unary import spin_images_at
 from .distortion import graph_map_distortion
 from .partial_fmap import EIGENPAIRS, partial_functional_map, restricted_zoomout
@@ -172,7 +172,8 @@ def part_descriptors(part: Surface, whole: Surface, p: Params) -> tuple[np.ndarr
     -------
     (N_part_working, SPIN_COMPONENTS) and (N_whole_working, SPIN_COMPONENTS) float64
     """
-    d_part, d_whole = spin_functions(part, p), spin_functions(whole, p)
+    d_whole = spin_functions(whole, p)
+    d_part = d_whole if part is whole else spin_functions(part, p)  # a shape matched to itself
     mean = d_whole.mean(axis=0)
     axes = np.linalg.svd(d_whole - mean, full_matrices=False)[2][:SPIN_COMPONENTS].T
     on_whole = (d_whole - mean) @ axes
@@ -414,8 +415,7 @@ def _weighed(name: str, share: float, stats: PartMapStats) -> tuple[dict[str, fl
 def _changed(input_map: np.ndarray, part: Surface, whole: Surface) -> float:
     """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance a
     map of input vertices changes by more than ``PART_MAP_CHANGE`` (NaN: no image)."""
-    image = np.asarray(input_map, dtype=np.int64)[part.working_inputs]
-    working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
+    working = working_map(input_map, part, whole)
     return float(graph_map_distortion(working, part.graph, whole.graph, PART_MAP_RADIUS).above(PART_MAP_CHANGE))
 
 

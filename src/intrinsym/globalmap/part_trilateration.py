@@ -23,8 +23,8 @@ import numpy as np
 
 from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
-from ..surface import Surface
-from .part_map import PART_MAP_CHANGE
+from ..surface import Surface, input_map, working_map
+from .part_map import PART_MAP_CHANGE, least_distorted, refine_part_map
 
 __all__ = [
     "CORE_AGREEMENT",
@@ -33,7 +33,7 @@ __all__ = [
     "TRILATERATION_ROUNDS",
     "anchor_core",
     "best_images",
-    "input_map",
+    "polished_trilateration",
     "trilaterated_maps",
 ]
 
@@ -138,12 +138,6 @@ def best_images(part_distances, whole_distances, reach, start):  # pragma: no co
     return out
 
 
-def input_map(working: np.ndarray, part: Surface, whole: Surface) -> np.ndarray:
-    """A map between working vertices, (N_part_working,) int (-1: none), as input
-    vertex of the whole of every input vertex of the part, (N_part_input,) int64."""
-    return np.where(working >= 0, whole.working_inputs[np.maximum(working, 0)], -1)[part.vertex_map]
-
-
 def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> list[np.ndarray]:
     """A part's map into its whole trilaterated from its anchor core, round after round.
 
@@ -175,14 +169,13 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> 
     """
     if part.shape.faces is None or whole.shape.faces is None:
         raise ValueError("trilaterating a part's map needs two meshes, not point clouds")
-    image = np.asarray(vertex_map, dtype=np.int64)[part.working_inputs]
-    mapped = np.flatnonzero(image >= 0)
+    working = working_map(vertex_map, part, whole)
+    mapped = np.flatnonzero(working >= 0)
     if len(mapped) < TRILATERATION_ANCHORS:
         return []
     part_graph, whole_graph = part.chord_graph, whole.chord_graph
     anchors = mapped[farthest_point_sampling(part.shape.vertices[mapped], TRILATERATION_ANCHORS)]
     on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
-    working = np.where(image >= 0, whole.vertex_map[np.maximum(image, 0)], -1)
     on_whole = np.empty((len(anchors), len(whole.shape.vertices)))
     images = np.full(len(anchors), -1)
     maps = []
@@ -197,3 +190,30 @@ def trilaterated_maps(vertex_map: np.ndarray, part: Surface, whole: Surface) -> 
         working = best_images(on_part[core], np.ascontiguousarray(on_whole[core].T), TRILATERATION_REACH, working)
         maps.append(input_map(working, part, whole))
     return maps
+
+
+def polished_trilateration(
+    seed: np.ndarray, given: tuple[Surface, Surface], measured: tuple[Surface, Surface]
+) -> np.ndarray | None:
+    """A hypothesis's map made final: the round of its trilateration that changes the
+    fewest of the part's distances, refined by ZoomOut.
+
+    Parameters
+    ----------
+    seed : (N_part_input,) int
+        Input vertex of the whole of every input vertex of the part, -1 for none.
+    given : (Surface, Surface)
+        The part and the whole prepared without refinement, on which the trilateration
+        and the refinement are solved.
+    measured : (Surface, Surface)
+        The part and the whole on whose working meshes the rounds' distortion is measured.
+
+    Returns
+    -------
+    (N_part_input,) int64 or None
+        None when the seed maps too few vertices to trilaterate.
+    """
+    rounds = trilaterated_maps(seed, *given)
+    if not rounds:
+        return None
+    return refine_part_map(rounds[least_distorted(rounds, *measured)[0]], *given)

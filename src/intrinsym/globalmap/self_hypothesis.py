@@ -35,10 +35,10 @@ from scipy.spatial.distance import cdist
 from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
 from ..params import Params
-from ..surface import Surface
+from ..surface import Surface, working_map
 from .part_hypothesis import HYPOTHESIS_SAMPLES, hypothesis_maps
-from .part_map import PART_MAP_CHANGE, least_distorted, part_descriptors, refine_part_map
-from .part_trilateration import TRILATERATION_ANCHORS, TRILATERATION_REACH, trilaterated_maps
+from .part_map import PART_MAP_CHANGE, part_descriptors
+from .part_trilateration import TRILATERATION_ANCHORS, TRILATERATION_REACH, polished_trilateration
 
 __all__ = [
     "SELF_LIKENESS",
@@ -106,8 +106,7 @@ def map_residual(vertex_map: np.ndarray, surface: Surface) -> np.ndarray:
     """
     if surface.shape.faces is None:
         raise ValueError("a map's residual needs a mesh, not a point cloud")
-    image = np.asarray(vertex_map, dtype=np.int64)[surface.working_inputs]
-    working = np.where(image >= 0, surface.vertex_map[np.maximum(image, 0)], -1)
+    working = working_map(vertex_map, surface, surface)
     mapped = np.flatnonzero(working >= 0)
     out = np.full(len(surface.vertex_map), np.nan)
     if not len(mapped):
@@ -153,8 +152,7 @@ def likeness_ranks(vertex_map: np.ndarray, surface: Surface, descriptors: np.nda
     (N_input,) float64 in [0, 1]
         NaN where the vertex has no image.
     """
-    image = np.asarray(vertex_map, dtype=np.int64)[surface.working_inputs]
-    working = np.where(image >= 0, surface.vertex_map[np.maximum(image, 0)], -1)
+    working = working_map(vertex_map, surface, surface)
     mapped = np.flatnonzero(working >= 0)
     ranks = np.full(len(working), np.nan)
     if len(mapped):
@@ -197,11 +195,9 @@ def self_symmetry_map(
     candidates = {"extraction": np.asarray(extraction_map, dtype=np.int64)}
     trivial = min(2.0 * p.trivial_radius, 0.5 * TRILATERATION_REACH)
     for k, seed in enumerate(hypothesis_maps(given, given, descriptors, count, trivial), start=1):
-        rounds = trilaterated_maps(seed, given, given)
-        if rounds:
-            candidates[f"hypothesis {k}"] = refine_part_map(
-                rounds[least_distorted(rounds, given, given)[0]], given, given
-            )
+        polished = polished_trilateration(seed, (given, given), (given, given))
+        if polished is not None:
+            candidates[f"hypothesis {k}"] = polished
     cut = {name: residual_cut(m, map_residual(m, given)) for name, m in candidates.items()}
     mapped = {name: float(np.mean(m >= 0)) for name, m in cut.items()}
     likeness: dict[str, float | None] = {}
