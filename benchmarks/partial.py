@@ -172,7 +172,7 @@ def reliability(
         return None
     scored, right = _right(vmap, truth, scores)
     histogram = score_histogram(result.symmetry_score()[scored], {"within_0.05": right})
-    return {"partial_score" if sym.kind == "partial" else "score": histogram}
+    return {"score" if sym.kind == "global" else "partial_score": histogram}
 
 
 def confidence_row(conf: np.ndarray, right: np.ndarray) -> dict:

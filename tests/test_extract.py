@@ -20,6 +20,7 @@ from intrinsym.extract.extract import (
     consistency,
     extract,
     grow,
+    mapped_symmetry,
     nearest_targets,
     normalise_rows,
     peaks,
@@ -163,6 +164,33 @@ def test_the_dominant_symmetry_is_the_global_one_else_the_widest_partial():
     assert Extraction([identity, a, b, same], -1, params).dominant_index == 2  # the best ranked of equals
     assert Extraction([identity], -1, params).dominant_symmetry is None
     assert Extraction([], -1, params).dominant_index == -1
+    # detect's partial symmetry map is dominant wherever it stands; the marginals' own stays the grown one
+    kept = Symmetry(np.arange(2), np.arange(2) + 3, 0.1, 1.0, "self map")
+    found = Extraction([identity, a, b, kept], -1, params)
+    assert found.dominant_symmetry is kept and found.grown_symmetry is b
+    assert Extraction([kept], -1, params).grown_index == -1
+    assert Extraction([a, b, c], 2, params).grown_symmetry is c
+
+
+def test_a_dense_map_on_the_samples():
+    # ten input vertices, two per source sample's cell (vertex 2i and 2i+1 in sample i's);
+    # the targets' cells hold vertex v in target v // 2 * 4 (the source samples' places)
+    support = Support(np.full(S, 0.1), TARGETS, np.arange(2 * S) // 2, np.arange(2 * S) // 2 * 4, True)
+    source_vertex = 2 * np.arange(S)
+    vmap = np.full(2 * S, -1)
+    vmap[source_vertex] = 2 * ((1 - np.arange(S)) % S)  # the mirror sends sample i to sample 1 - i
+    vmap[source_vertex[7]] = -1  # no partner
+    sym = mapped_symmetry(vmap, source_vertex, EDGES, support, ExtractParams())
+    assert sym.kind == "self map" and sym.source.tolist() == [0, 1, 2, 3, 4, 5, 6, 8, 9]
+    assert np.array_equal(sym.target, MIRROR[sym.source]) and sym.consistency == 1.0
+    assert sym.score == pytest.approx(0.9)
+    # one sample sent one sample along: its two edges of eight mapped break
+    vmap[source_vertex[3]] = 2 * ((1 - 3 + 1) % S)
+    moved = mapped_symmetry(vmap, source_vertex, EDGES, support, ExtractParams())
+    assert moved.consistency == pytest.approx(6 / 8) and moved.score == pytest.approx(0.9 * 6 / 8)
+    # stored and read back with its kind
+    arrays = Extraction([moved], -1, ExtractParams()).to_arrays()
+    assert Extraction.from_arrays(arrays, ExtractParams(), S, T).symmetries[0].kind == "self map"
 
 
 def test_with_inverse_covers_the_other_side_of_a_one_sided_part():

@@ -196,8 +196,9 @@ def test_the_partial_shapes_limbs_map_onto_each_other_and_its_body_has_no_partne
     g = shapes.partial()
     mesh = Shape(g.vertices, g.faces)
     result = intrinsym.detect((g.vertices, g.faces), intrinsym.make_params(n_source=150, n_target=1500))
-    assert result.global_symmetry is None and result.extraction.dominant_symmetry.kind == "partial"
+    assert result.global_symmetry is None and result.extraction.grown_symmetry.kind == "partial"
     assert result.info.self_map is not None and result.info.self_map.source == "extraction"
+    assert result.extraction.dominant_index == 0 and result.extraction.symmetries[0].kind == "self map"
     truth = partial_truth.PartialTruth(g.symmetries[0], np.zeros(len(g.vertices)), np.sqrt(surface_area(mesh)))
     scores = partial_truth.score_partial(result.symmetry_map(), mesh, truth)
     assert scores.unpartnered_unmapped >= 0.95, scores

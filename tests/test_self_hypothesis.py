@@ -5,6 +5,8 @@ random map, which maps count, and a SHREC'16 dog with holes, saved and summarise
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ import intrinsym
 from conftest import shared
 from intrinsym.app import cli
 from intrinsym.evaluation import partial_truth
+from intrinsym.extract import part_mask
 from intrinsym.globalmap import part_hypothesis, part_map, self_hypothesis
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays
@@ -117,11 +120,15 @@ def test_a_dog_with_holes_gets_its_symmetry_and_no_partner_for_the_holes_mirrors
     assert result.info.self_map.source == "hypothesis 1"
     scores = partial_truth.score_partial(result.symmetry_map(), shape, truth)
     assert scores.partnered_within_010 >= 0.8 and scores.unpartnered_unmapped >= 0.95, scores
-    assert np.array_equal(result.symmetry_maps()[result.extraction.dominant_index], result.symmetry_map())
+    # the map kept ranks first among the symmetries, and its parts are the truth's partnered region
+    assert result.extraction.dominant_index == 0 and result.extraction.symmetries[0].kind == "self map"
+    assert np.array_equal(result.symmetry_maps()[0], result.symmetry_map())
     # saved and loaded: the same map and the same record of how it was chosen
     loaded = intrinsym.Result.load(result.save(tmp_path / "out"))
     assert np.array_equal(loaded.symmetry_map(), result.symmetry_map()) and loaded.info.self_map == result.info.self_map
     assert np.array_equal(np.load(tmp_path / "out" / "symmetry_map.npy"), result.symmetry_map())
+    first = json.loads((tmp_path / "out" / "symmetries.json").read_text())[0]
+    assert first["kind"] == "self map" and partial_truth.part_iou(part_mask(first, len(shape.vertices)), truth) >= 0.8
     cli._print_summary(cli._summary(result, tmp_path / "out"))
     assert "no global symmetry: the partial symmetry map is hypothesis 1 (vertices mapped: extraction" in (
         capsys.readouterr().out

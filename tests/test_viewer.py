@@ -39,11 +39,12 @@ def test_part_masks_mark_source_and_image_bits():
     assert masks.tolist() == [[1, 3, 0, 2, 0]] * 2
 
 
-def test_best_symmetry_is_the_global_one_else_the_best_scoring():
+def test_best_symmetry_is_the_global_one_else_the_self_map_else_the_best_scoring():
     assert viewer.best_symmetry([]) == -1
     assert viewer.best_symmetry([{"kind": "partial", "score": 0.9}, {"kind": "global", "score": 0.5}]) == 1
     ranked = [{"kind": "identity", "score": 1.0}, {"kind": "partial", "score": 0.2}, {"kind": "partial", "score": 0.3}]
     assert viewer.best_symmetry(ranked) == 2
+    assert viewer.best_symmetry([*ranked, {"kind": "self map", "score": 0.1}]) == 3
     assert viewer.best_symmetry(ranked[:1]) == 0
     # The best takes the last listed place when it ranks below the listed ones.
     many = [{"kind": "partial", "score": 0.9 - 0.01 * i} for i in range(viewer.MAX_SYMMETRIES + 5)]

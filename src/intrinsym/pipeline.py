@@ -22,7 +22,7 @@ import numpy as np
 
 from . import resources
 from .errors import ParameterError
-from .extract.extract import consistency, extract_from_support
+from .extract.extract import consistency, extract_from_support, mapped_symmetry
 from .extract.reflection import RETURN_RADIUS, reflection
 from .extract.support import SourceGraph, Support
 from .extract.symmetry import Extraction
@@ -538,7 +538,9 @@ def detect(
     anchors around a vertex by more than ``SELF_RESIDUAL`` ("no partner"), the one that
     maps the most vertices among those whose images look like their vertices (median
     likeness rank at most ``SELF_LIKENESS``), else -1 everywhere (``run.json``:
-    ``self_map``; the stage ``self map``).
+    ``self_map``; the stage ``self map``). A map kept ranks first among the symmetries
+    (kind "self map", :func:`~intrinsym.extract.extract.mapped_symmetry`) and is the
+    dominant one.
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target, seed=seed)
     check_machine(p)
@@ -566,9 +568,14 @@ def detect(
     # a Surface given keeps only its working mesh: the hypotheses are solved on that
     given = surf if isinstance(shape, Surface) or serves(surf, 0) else prepare_surface(s, 0)
     image, stats = self_symmetry_map(result.symmetry_map(), given, p, p.self_hypotheses)
+    extraction = result.extraction
+    if stats.source != "none" and extraction is not None and result.support is not None:
+        # the map kept ranks first in symmetries.json, its row of symmetry_maps.npy the map itself
+        kept = mapped_symmetry(image, result.source_point_vertex, result.edges, result.support, extraction.params)
+        extraction = dataclasses.replace(extraction, symmetries=[kept, *extraction.symmetries])
     clock.lap("self map")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), self_map=stats)
-    return dataclasses.replace(result, global_map=image, info=info)
+    return dataclasses.replace(result, global_map=image, info=info, extraction=extraction)
 
 
 def match(

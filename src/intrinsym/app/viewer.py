@@ -107,8 +107,9 @@ def part_masks(records: Sequence[Mapping[str, Any]], n_vertices: int) -> np.ndar
 def best_symmetry(records: Sequence[Mapping[str, Any]]) -> int:
     """Index of the symmetry the page shows first.
 
-    The global symmetry when there is one, else the highest-scoring symmetry that is
-    not the identity (the highest-scoring one when all are).
+    The global symmetry when there is one, else ``detect``'s partial symmetry map (kind
+    "self map"), else the highest-scoring symmetry that is not the identity (the
+    highest-scoring one when all are).
 
     Parameters
     ----------
@@ -121,8 +122,9 @@ def best_symmetry(records: Sequence[Mapping[str, Any]]) -> int:
         -1 when ``records`` is empty.
     """
     kinds = [rec.get("kind") for rec in records]
-    if "global" in kinds:
-        return kinds.index("global")
+    for dominant in ("global", "self map"):
+        if dominant in kinds:
+            return kinds.index(dominant)
     candidates = [i for i, kind in enumerate(kinds) if kind != "identity"] or list(range(len(records)))
     return max(candidates, key=lambda i: float(records[i].get("score", 0.0)), default=-1)
 

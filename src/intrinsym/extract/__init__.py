@@ -11,7 +11,7 @@ decision); :mod:`.records` writes the symmetries in input-vertex indices.
 
 from __future__ import annotations
 
-from .extract import consistency, extract_from_support, is_identity, query, query_from_support
+from .extract import consistency, extract_from_support, is_identity, mapped_symmetry, query, query_from_support
 from .records import part_mask, part_vertices
 from .support import SourceGraph, Support
 from .symmetry import Extraction, ExtractParams, Symmetry
@@ -25,6 +25,7 @@ __all__ = [
     "consistency",
     "extract_from_support",
     "is_identity",
+    "mapped_symmetry",
     "part_mask",
     "part_vertices",
     "query",

@@ -44,6 +44,7 @@ __all__ = [
     "extract_from_support",
     "grow",
     "is_identity",
+    "mapped_symmetry",
     "nearest_targets",
     "normalise_rows",
     "peaks",
@@ -270,6 +271,39 @@ def _make(
     kept = consistency(image, graph, targets, p.d_error)
     score = float(norm[src, image[src]].sum()) / norm.shape[0] * kept
     return Symmetry(src, image[src], score, kept, kind)
+
+
+def mapped_symmetry(
+    vertex_map: np.ndarray, source_vertex: np.ndarray, edges: np.ndarray, support: Support, params: ExtractParams
+) -> Symmetry:
+    """A dense self-map on the samples: the symmetry record of a map not grown from the
+    marginals (``detect``'s partial symmetry map, kind "self map").
+
+    Each source sample whose vertex the map sends somewhere pairs with the target sample
+    whose Voronoi cell holds the image vertex. The score is the share of the source
+    samples so mapped times the consistency: the marginals do not support such a map (it
+    is drawn where they found no global symmetry), so they do not weigh it.
+
+    Parameters
+    ----------
+    vertex_map : (N_input,) int
+        Input vertex of every input vertex, -1 for none.
+    source_vertex : (S,) int64
+        Input vertex of every source sample.
+    edges : (E, 2) int64
+        The source graph.
+    support : Support
+        Of the same run (self-matching: the target samples lie on the same shape).
+    params : ExtractParams
+        ``d_error`` for the consistency.
+    """
+    images = np.asarray(vertex_map, dtype=np.int64)[source_vertex]
+    cells = support.vertex_target[np.maximum(images, 0)]
+    image = np.where((images >= 0) & (cells >= 0), cells, -1)
+    graph = SourceGraph.from_edges(edges, support.edge_length, len(image))
+    kept = consistency(image, graph, support.targets, params.d_error)
+    source = np.flatnonzero(image >= 0)
+    return Symmetry(source, image[source], len(source) / max(len(image), 1) * kept, kept, "self map")
 
 
 def query(

@@ -112,7 +112,10 @@ class Symmetry:
     consistency : float
         Fraction of source edges inside the part whose images keep their length within
         ``d_error`` (1.0 for a part without internal edges).
-    kind : {"identity", "partial", "global"}
+    kind : {"identity", "partial", "global", "self map"}
+        "self map": ``detect``'s partial symmetry map of a shape without a global one
+        (:func:`intrinsym.extract.extract.mapped_symmetry`), not grown from the marginals:
+        its score is its share of the source samples times ``consistency``.
     """
 
     source: np.ndarray
@@ -158,7 +161,7 @@ class Extraction:
         "global_index",
     )
     #: The values of :attr:`Symmetry.kind`.
-    KINDS: ClassVar[tuple[str, ...]] = ("identity", "partial", "global")
+    KINDS: ClassVar[tuple[str, ...]] = ("identity", "partial", "global", "self map")
 
     @classmethod
     def stored_in(cls, names: Collection[str]) -> bool:
@@ -219,19 +222,33 @@ class Extraction:
 
     @property
     def dominant_index(self) -> int:
-        """Index into ``symmetries`` of the dominant symmetry: the global one, else the
-        non-identity one over the most source samples (the best ranked of equals); -1
+        """Index into ``symmetries`` of the dominant symmetry: ``detect``'s partial
+        symmetry map (kind "self map") when it kept one, else :attr:`grown_index`; -1
         when there is none. On an incomplete shape the symmetry of what is there is
         partial: it is the dominant one, not "nothing"."""
-        if self.global_index >= 0:
-            return self.global_index
-        found = [i for i, sym in enumerate(self.symmetries) if sym.kind != "identity"]
-        return max(found, key=lambda i: len(self.symmetries[i].source)) if found else -1
+        kinds = [sym.kind for sym in self.symmetries]
+        return kinds.index("self map") if "self map" in kinds else self.grown_index
 
     @property
     def dominant_symmetry(self) -> Symmetry | None:
         """The dominant symmetry (:attr:`dominant_index`), None when there is none."""
         return self.symmetries[self.dominant_index] if self.dominant_index >= 0 else None
+
+    @property
+    def grown_index(self) -> int:
+        """Index into ``symmetries`` of the dominant symmetry grown from the marginals:
+        the global one, else the partial one over the most source samples (the best
+        ranked of equals); -1 when there is none."""
+        if self.global_index >= 0:
+            return self.global_index
+        found = [i for i, sym in enumerate(self.symmetries) if sym.kind == "partial"]
+        return max(found, key=lambda i: len(self.symmetries[i].source)) if found else -1
+
+    @property
+    def grown_symmetry(self) -> Symmetry | None:
+        """The dominant symmetry grown from the marginals (:attr:`grown_index`), None when
+        there is none."""
+        return self.symmetries[self.grown_index] if self.grown_index >= 0 else None
 
 
 def with_inverse(symmetry: Symmetry, source_points: np.ndarray, target_points: np.ndarray, radius: float) -> Symmetry:

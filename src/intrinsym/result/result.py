@@ -206,13 +206,14 @@ class Result:
         return supported_map(self.extraction_map(), self.support.source_mesh_vertices, self.info.resolved.scale)
 
     def extraction_map(self) -> np.ndarray:
-        """(N_in,) int64: the extraction's own vertex map of the dominant symmetry
-        (:func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`, -1 off its parts), -1
+        """(N_in,) int64: the extraction's own vertex map of the dominant symmetry grown
+        from the marginals (:attr:`intrinsym.extract.symmetry.Extraction.grown_symmetry`;
+        :func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map`, -1 off its parts), -1
         everywhere when there is none; the symmetry map when the run chose no other.
         Needs ``support`` and ``extraction``."""
         if self.support is None or self.extraction is None:
             raise ValueError("the result has no extraction")
-        sym = self.extraction.dominant_symmetry
+        sym = self.extraction.grown_symmetry
         if sym is not None and sym.kind == "partial" and self.support.self_match and len(self.edges):
             # a partial symmetry holds one side's pairs; its map covers the other side too
             length = np.linalg.norm(np.diff(self.source_points[self.edges], axis=1)[:, 0], axis=1)
