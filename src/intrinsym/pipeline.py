@@ -30,7 +30,7 @@ from .geodesics import geodesics
 from .globalmap.globalmap import GlobalMap, choose_global_map, local_map_distortion, supported_map
 from .globalmap.part_chain import part_vertex_map
 from .globalmap.part_map import choose_part_map
-from .globalmap.self_hypothesis import self_symmetry_map
+from .globalmap.self_hypothesis import TRIVIAL_SHARE, fixed_share, self_symmetry_map
 from .globalmap.vertex_maps import inverse_vertex_map
 from .mesh.shape import Shape, surface_area, vertex_areas
 from .mrf import bp, model
@@ -531,13 +531,17 @@ def detect(
     Notes
     -----
     Where no global symmetry is found on a mesh (a shape with a side cut away or holes),
-    the symmetry map (``global_map``) is the partial one
+    or the global map found is the trivial match (more than ``TRIVIAL_SHARE`` of its
+    vertices stay within ``trivial_radius`` of themselves,
+    :func:`~intrinsym.globalmap.self_hypothesis.fixed_share`; its symmetry then becomes an
+    identity one), the symmetry map (``global_map``) is the partial one
     :func:`~intrinsym.globalmap.self_hypothesis.self_symmetry_map` keeps: of the
     extraction's map and ``params.self_hypotheses`` maps located from consistent clusters
     of spin-image self-matches, each with -1 where it changes the distances to the
     anchors around a vertex by more than ``SELF_RESIDUAL`` ("no partner"), the one that
     maps the most vertices among those whose images look like their vertices (median
-    likeness rank at most ``SELF_LIKENESS``), else -1 everywhere (``run.json``:
+    likeness rank at most ``SELF_LIKENESS``) and that are not the trivial match, else -1
+    everywhere (``run.json``:
     ``self_map``; the stage ``self map``). A map kept ranks first among the symmetries
     (kind "self map", :func:`~intrinsym.extract.extract.mapped_symmetry`) and is the
     dominant one.
@@ -563,11 +567,17 @@ def detect(
     clock.lap("sampling")
     header = {"mode": "detect", "input": str(surf.shape.path), "preset": preset}
     result = _solve(sampled(surf, surf, ps, pt, p, True), p, clock, header)
-    if result.global_map is not None or not p.self_hypotheses or surf.shape.faces is None:
+    if not p.self_hypotheses or surf.shape.faces is None:
         return result
     # a Surface given keeps only its working mesh: the hypotheses are solved on that
     given = surf if isinstance(shape, Surface) or serves(surf, 0) else prepare_surface(s, 0)
-    image, stats = self_symmetry_map(result.symmetry_map(), given, p, p.self_hypotheses)
+    trivial = None
+    if result.global_map is not None:
+        trivial = fixed_share(result.global_map, given, p.trivial_radius)
+        if trivial <= TRIVIAL_SHARE:
+            return result
+        result = _trivial_global(result)
+    image, stats = self_symmetry_map(result.symmetry_map(), given, p, p.self_hypotheses, trivial)
     extraction = result.extraction
     if stats.source != "none" and extraction is not None and result.support is not None:
         # the map kept ranks first in symmetries.json, its row of symmetry_maps.npy the map itself
@@ -576,6 +586,18 @@ def detect(
     clock.lap("self map")
     info = dataclasses.replace(result.info, seconds=dict(clock.seconds), self_map=stats)
     return dataclasses.replace(result, global_map=image, info=info, extraction=extraction)
+
+
+def _trivial_global(result: Result) -> Result:
+    """``result`` without its global map, which was the trivial match: the global
+    symmetry becomes an identity one (kind "identity", no longer global)."""
+    assert result.extraction is not None and result.extraction.global_index >= 0
+    extraction = result.extraction
+    symmetries = list(extraction.symmetries)
+    symmetries[extraction.global_index] = dataclasses.replace(symmetries[extraction.global_index], kind="identity")
+    extraction = dataclasses.replace(extraction, symmetries=symmetries, global_index=-1)
+    info = dataclasses.replace(result.info, global_map=None)
+    return dataclasses.replace(result, extraction=extraction, global_map=None, map_distortion=None, info=info)
 
 
 def match(

@@ -263,7 +263,12 @@ def _print_summary(s: dict) -> None:
         )
     if (sm := s.get("self_map")) is not None:
         shares = ", ".join(f"{name} {share:.2f}" for name, share in sm["mapped"].items())
-        print(f"no global symmetry: the partial symmetry map is {sm['source']} (vertices mapped: {shares})")
+        why = (
+            "no global symmetry"
+            if sm.get("trivial_global") is None
+            else f"the global map is the trivial match ({sm['trivial_global']:.2f} of its vertices stay put)"
+        )
+        print(f"{why}: the partial symmetry map is {sm['source']} (vertices mapped: {shares})")
     if (m := s.get("modes")) is not None:
         source = "the target's symmetry" if m["second_from"] == "target_symmetry" else "the marginals"
         state = "both answers stand" if m["both"] else "one answer"

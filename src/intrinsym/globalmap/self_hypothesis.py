@@ -16,13 +16,17 @@ farthest-point anchors around it, is small where the symmetry holds and large wh
 partner: the map sends it into the missing part's place, among vertices at other
 distances. The vertices whose residual exceeds :data:`SELF_RESIDUAL` get -1.
 
-A shape can also have near-isometries that are no symmetry: on a nearly round body a
-slide keeps the distances almost everywhere. A symmetry's images look like their
+A shape can also have near-isometries that are no symmetry. The trivial match keeps every
+distance: a map under which most vertices stay within the trivial radius of themselves
+(:func:`fixed_share` above :data:`TRIVIAL_SHARE`) is the identity, not a symmetry, even
+when the extraction took it for a global one (a side cut away, and the map sends the
+other side onto itself). On a nearly round body a slide keeps the distances almost
+everywhere. A symmetry's images look like their
 vertices, a slide's do not: a map counts only when, over its mapped vertices, the median
 rank of the image's descriptor among all the samples' by likeness to the vertex's own
-(:func:`likeness_ranks`) is at most :data:`SELF_LIKENESS`. :func:`self_symmetry_map`
-keeps, of the extraction's map and the hypotheses so cut, the one that counts and maps
-the most of the shape; -1 everywhere when none counts.
+(:func:`likeness_ranks`) is at most :data:`SELF_LIKENESS` and it is not the trivial
+match. :func:`self_symmetry_map` keeps, of the extraction's map and the hypotheses so
+cut, the one that counts and maps the most of the shape; -1 everywhere when none counts.
 """
 
 from __future__ import annotations
@@ -44,6 +48,8 @@ __all__ = [
     "SELF_LIKENESS",
     "SELF_RESIDUAL",
     "SelfMapStats",
+    "TRIVIAL_SHARE",
+    "fixed_share",
     "likeness_ranks",
     "map_residual",
     "residual_cut",
@@ -61,6 +67,10 @@ SELF_RESIDUAL = PART_MAP_CHANGE
 #: partial shape's limb swap, 0.29-0.32 for the slide of its body the hypotheses find
 #: there; 0.5 for a random map.
 SELF_LIKENESS = 0.15
+#: A self-map is the trivial match when more than this share of the vertices it maps stay
+#: within the trivial radius of themselves (:func:`fixed_share`): the majority. A
+#: reflection keeps only a band along its fixed curve there.
+TRIVIAL_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -77,11 +87,20 @@ class SelfMapStats:
     likeness : dict of str to float or None
         Each candidate's median likeness rank there (None: it maps no vertex); above
         :data:`SELF_LIKENESS` it does not count.
+    fixed : dict of str to float
+        Each candidate's :func:`fixed_share` there; above :data:`TRIVIAL_SHARE` it is the
+        trivial match and does not count.
+    trivial_global : float or None
+        The :func:`fixed_share` of the global map the run had found, when that map was
+        the trivial match (then the extraction's candidate is its widest partial
+        symmetry); None when it found none.
     """
 
     source: str
     mapped: dict[str, float] = field(default_factory=dict)
     likeness: dict[str, float | None] = field(default_factory=dict)
+    fixed: dict[str, float] = field(default_factory=dict)
+    trivial_global: float | None = None
 
 
 def map_residual(vertex_map: np.ndarray, surface: Surface) -> np.ndarray:
@@ -163,8 +182,37 @@ def likeness_ranks(vertex_map: np.ndarray, surface: Surface, descriptors: np.nda
     return ranks[surface.vertex_map]
 
 
+def fixed_share(vertex_map: np.ndarray, surface: Surface, radius: float) -> float:
+    """The share of a self-map's mapped vertices whose image lies within ``radius`` of them.
+
+    Estimated on ``HYPOTHESIS_SAMPLES`` farthest-point samples of the mapped working
+    vertices, by the geodesic on the mesh edges and the chords across them
+    (``surface.chord_graph``).
+
+    Parameters
+    ----------
+    vertex_map : (N_input,) int
+        Input vertex of every input vertex, -1 for none.
+    surface : Surface
+        A mesh; the map's domain and codomain.
+    radius : float
+        sqrt(area) units (``trivial_radius``).
+
+    Returns
+    -------
+    float in [0, 1]; 0 for a map with no image.
+    """
+    working = working_map(vertex_map, surface, surface)
+    mapped = np.flatnonzero(working >= 0)
+    if not len(mapped):
+        return 0.0
+    samples = mapped[farthest_point_sampling(surface.shape.vertices[mapped], min(HYPOTHESIS_SAMPLES, len(mapped)))]
+    near = distances_from(surface.chord_graph, samples, limit=radius)
+    return float(np.mean(near[np.arange(len(samples)), working[samples]] <= radius))
+
+
 def self_symmetry_map(
-    extraction_map: np.ndarray, given: Surface, p: Params, count: int
+    extraction_map: np.ndarray, given: Surface, p: Params, count: int, trivial_global: float | None = None
 ) -> tuple[np.ndarray, SelfMapStats]:
     """The partial symmetry map ``detect`` keeps for a shape without a global symmetry.
 
@@ -179,6 +227,8 @@ def self_symmetry_map(
         The spin images' parameters and ``trivial_radius``.
     count : int
         Hypotheses to draw.
+    trivial_global : float, optional
+        The fixed share of a global map found to be the trivial match, for the record.
 
     Returns
     -------
@@ -186,7 +236,8 @@ def self_symmetry_map(
         Of the extraction's map and the hypotheses, each with -1 where its residual
         exceeds :data:`SELF_RESIDUAL`, the one that maps the most input vertices (the
         extraction's on a tie) among those whose median likeness rank is at most
-        :data:`SELF_LIKENESS`; -1 everywhere when there is none.
+        :data:`SELF_LIKENESS` and whose :func:`fixed_share` is at most
+        :data:`TRIVIAL_SHARE`; -1 everywhere when there is none.
     stats : SelfMapStats
     """
     descriptors = part_descriptors(given, given, p)
@@ -204,10 +255,14 @@ def self_symmetry_map(
     for name, m in cut.items():
         ranks = likeness_ranks(m, given, descriptors[0])[m >= 0]
         likeness[name] = float(np.median(ranks)) if len(ranks) else None
+    fixed = {name: fixed_share(m, given, p.trivial_radius) for name, m in cut.items()}
     counts = {
-        name: mapped[name] if (rank is not None and rank <= SELF_LIKENESS) else 0.0 for name, rank in likeness.items()
+        name: mapped[name] if (rank is not None and rank <= SELF_LIKENESS and fixed[name] <= TRIVIAL_SHARE) else 0.0
+        for name, rank in likeness.items()
     }
     best = max(counts, key=lambda name: (counts[name], name == "extraction"))
-    if counts[best] == 0.0:
-        return np.full(len(extraction_map), -1, dtype=np.int64), SelfMapStats("none", mapped, likeness)
-    return cut[best], SelfMapStats(best, mapped, likeness)
+    source = best if counts[best] > 0.0 else "none"
+    stats = SelfMapStats(source, mapped, likeness, fixed, trivial_global)
+    if source == "none":
+        return np.full(len(extraction_map), -1, dtype=np.int64), stats
+    return cut[best], stats
