@@ -574,6 +574,7 @@ def detect(
     trivial = None
     if result.global_map is not None:
         trivial = fixed_share(result.global_map, given, p.trivial_radius)
+        clock.lap("trivial check")
         if trivial <= TRIVIAL_SHARE:
             return result
         result = _trivial_global(result)
