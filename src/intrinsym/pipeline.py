@@ -578,7 +578,8 @@ def detect(
         if trivial <= TRIVIAL_SHARE:
             return result
         result = _trivial_global(result)
-    image, stats = self_symmetry_map(result.symmetry_map(), given, p, p.self_hypotheses, trivial)
+    image, stats = self_symmetry_map(result.symmetry_map(), given, p, p.self_hypotheses)
+    stats = dataclasses.replace(stats, trivial_global=trivial)
     extraction = result.extraction
     if stats.source != "none" and extraction is not None and result.support is not None:
         # the map kept ranks first in symmetries.json, its row of symmetry_maps.npy the map itself

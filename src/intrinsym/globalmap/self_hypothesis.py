@@ -212,7 +212,7 @@ def fixed_share(vertex_map: np.ndarray, surface: Surface, radius: float) -> floa
 
 
 def self_symmetry_map(
-    extraction_map: np.ndarray, given: Surface, p: Params, count: int, trivial_global: float | None = None
+    extraction_map: np.ndarray, given: Surface, p: Params, count: int
 ) -> tuple[np.ndarray, SelfMapStats]:
     """The partial symmetry map ``detect`` keeps for a shape without a global symmetry.
 
@@ -227,8 +227,6 @@ def self_symmetry_map(
         The spin images' parameters and ``trivial_radius``.
     count : int
         Hypotheses to draw.
-    trivial_global : float, optional
-        The fixed share of a global map found to be the trivial match, for the record.
 
     Returns
     -------
@@ -262,7 +260,7 @@ def self_symmetry_map(
     }
     best = max(counts, key=lambda name: (counts[name], name == "extraction"))
     source = best if counts[best] > 0.0 else "none"
-    stats = SelfMapStats(source, mapped, likeness, fixed, trivial_global)
+    stats = SelfMapStats(source, mapped, likeness, fixed)
     if source == "none":
         return np.full(len(extraction_map), -1, dtype=np.int64), stats
     return cut[best], stats
