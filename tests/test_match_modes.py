@@ -12,7 +12,8 @@ from scipy.spatial import cKDTree
 import intrinsym
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
-from intrinsym.globalmap import confidence
+from intrinsym.geodesics._dijkstra import ball_pairs, csr_arrays
+from intrinsym.globalmap import confidence, distortion, part_map
 from intrinsym.globalmap.part_map import PartMapStats
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
@@ -129,6 +130,33 @@ def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and
     assert result.info.part_map == back.info.part_map == PartMapStats("extraction", {"extraction": share})
     own = confidence.calibrated(np.array([1.0 - share]), table=confidence.PART_CALIBRATION)[0]
     assert np.allclose(back.symmetry_confidence()[found >= 0], own, atol=1e-6)
+
+
+def test_a_parts_maps_are_weighed_on_kept_balls_and_a_clipped_curve(half_and_whole):
+    """The share of the part's pairs a map changes by more than PART_MAP_CHANGE, as the
+    part map weighs it (the part's balls kept on the surface, the whole's distances
+    clipped at twice the change), equals the full distortion curve's on maps that
+    change pairs by less, between and by more than the clip."""
+    half, whole, _ = half_and_whole
+    part, full = prepare_pair(half, whole, 0, "larger")
+    image = cKDTree(full.to_input(full.shape.vertices)).query(part.to_input(part.shape.vertices))[1]
+    sources = np.arange(0, len(image), 7)
+    first = part.balls(sources, part_map.PART_MAP_RADIUS)
+    assert part.balls(sources.copy(), part_map.PART_MAP_RADIUS) is first  # kept, not solved again
+    for got, want in zip(first, ball_pairs(csr_arrays(part.graph), sources, part_map.PART_MAP_RADIUS)):
+        assert np.array_equal(got, want)
+    rng = np.random.default_rng(0)
+    for moved in (0.0, 0.02, 0.2):
+        noisy = image.copy()
+        pick = rng.random(len(image)) < moved
+        noisy[pick] = rng.integers(0, len(full.shape.vertices), pick.sum())
+        args = (noisy, part.graph, full.graph, part_map.PART_MAP_RADIUS)
+        curve = distortion.graph_map_distortion(*args)
+        clip = np.array([part_map.PART_MAP_CHANGE, 2 * part_map.PART_MAP_CHANGE])
+        weighed = distortion.graph_map_distortion(*args, thresholds=clip, balls=part.balls)
+        assert weighed.above(part_map.PART_MAP_CHANGE) == curve.above(part_map.PART_MAP_CHANGE)
+        if moved:
+            assert 0.0 < curve.above(2 * part_map.PART_MAP_CHANGE) < curve.above(part_map.PART_MAP_CHANGE) < 1.0
 
 
 @pytest.mark.slow  # two matches at 150 / 1500, the size its shares were measured at (CI: -m slow)

@@ -8,6 +8,7 @@ found map, how isometric that map is.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -134,6 +135,7 @@ def graph_map_distortion(
     n_sources: int = 200,
     seed: int = 0,
     thresholds: np.ndarray = THRESHOLDS,
+    balls: Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None,
 ) -> DistortionScores:
     """:func:`map_distortion` of a map between the vertices of two geodesic graphs (one
     graph twice for a self-map), distances in the graphs' own unit.
@@ -148,6 +150,9 @@ def graph_map_distortion(
         Of its codomain, in the same unit.
     radius, n_sources, seed, thresholds
         As for :func:`map_distortion`.
+    balls : callable, optional
+        ``balls(sources, limit)``: ``graph``'s balls as :func:`ball_pairs` gives them, when
+        the caller keeps them (:meth:`intrinsym.surface.Surface.balls`).
 
     Returns
     -------
@@ -160,7 +165,7 @@ def graph_map_distortion(
         return DistortionScores(thresholds, np.full(len(thresholds), np.nan), float("nan"), radius, 0)
     x = np.random.default_rng(seed).choice(mapped, size=min(n_sources, len(mapped)), replace=False)
     top = float(thresholds.max())
-    rows, ys, d = ball_pairs(csr_arrays(graph), x, radius)
+    rows, ys, d = ball_pairs(csr_arrays(graph), x, radius) if balls is None else balls(x, radius)
     keep = (image[ys] >= 0) & (ys != x[rows])
     rows, ys, d = rows[keep], ys[keep], d[keep]
     # d(T x, T y) up to radius + top: a pair beyond changes by at least top

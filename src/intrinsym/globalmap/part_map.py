@@ -52,6 +52,11 @@ PART_MAP_RADIUS = 0.25
 #: On the 125 SHREC'16 pairs the share of changed pairs ranks the right maps (within
 #: 0.10 on >= 0.80 of the vertices) above the wrong ones (< 0.50) with an AUC of 0.999.
 PART_MAP_CHANGE = 0.05
+#: Only the share of pairs changed by more than PART_MAP_CHANGE is read: a change
+#: clipped at twice that decides it as exactly, and the whole's distances are then
+#: needed only to PART_MAP_RADIUS + 2 PART_MAP_CHANGE, not to the radius + 0.25 that
+#: the full distortion curve takes.
+_CHANGE_CLIP = np.array([PART_MAP_CHANGE, 2.0 * PART_MAP_CHANGE])
 #: A refined part's map (:func:`refine_part_map`) keeps its images within this
 #: geodesic distance (sqrt(area) of the whole) of the map's own; set once, not tuned.
 REFINE_REACH = 0.15
@@ -416,7 +421,10 @@ def _changed(input_map: np.ndarray, part: Surface, whole: Surface) -> float:
     """The share of the part's vertex pairs within ``PART_MAP_RADIUS`` whose distance a
     map of input vertices changes by more than ``PART_MAP_CHANGE`` (NaN: no image)."""
     working = working_map(input_map, part, whole)
-    return float(graph_map_distortion(working, part.graph, whole.graph, PART_MAP_RADIUS).above(PART_MAP_CHANGE))
+    scores = graph_map_distortion(
+        working, part.graph, whole.graph, PART_MAP_RADIUS, thresholds=_CHANGE_CLIP, balls=part.balls
+    )
+    return float(scores.above(PART_MAP_CHANGE))
 
 
 def choose_part_map(
