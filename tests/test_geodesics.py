@@ -207,6 +207,10 @@ def test_pair_distances_and_limit_match_dense(small_sphere) -> None:
     inner = dense[:5] <= 0.2 * (1 - 1e-9)
     np.testing.assert_allclose(rows[inner], dense[:5][inner], rtol=1e-12)
     np.testing.assert_allclose(distances_from(g, pts[:5]), dense[:5], rtol=1e-12)
+    # the threaded searches give SciPy's distances to the last bit, chunk by chunk
+    for limit in (0.2, np.inf):
+        ref = dijkstra(g, directed=True, indices=pts[:5], limit=limit)
+        np.testing.assert_array_equal(distances_from(g, pts[:5], limit=limit, chunk=2), ref)
 
 
 def test_distances_to_points_match_dense_dijkstra(small_sphere) -> None:

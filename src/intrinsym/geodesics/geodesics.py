@@ -258,6 +258,10 @@ def unit_area_graph(shape: Shape) -> tuple[Shape, np.ndarray, sp.csr_matrix]:
 def distances_from(graph: sp.spmatrix, sources: np.ndarray, limit: float = np.inf, chunk: int = 256) -> np.ndarray:
     """Graph-geodesic distances from a few sources to every vertex.
 
+    :func:`distances_to` every vertex: SciPy's ``dijkstra`` gives the same distances to
+    the last bit (tests/test_geodesics.py) but holds the GIL, so its searches ran one at
+    a time.
+
     Parameters
     ----------
     graph : (N, N) sparse, symmetric
@@ -267,29 +271,27 @@ def distances_from(graph: sp.spmatrix, sources: np.ndarray, limit: float = np.in
     limit : float
         Distances beyond ``limit`` are not computed and come back as ``inf``.
     chunk : int
-        Sources per Dijkstra call (bounds temporary memory to ``chunk x N``).
+        Sources per batch of searches (bounds temporary memory to ``chunk x N``).
 
     Returns
     -------
     (m, N) float64
         Distances in length units; ``inf`` beyond ``limit`` or where unreachable.
     """
-    g = sp.csr_matrix(graph)
     src = np.asarray(sources, dtype=np.int64).ravel()
-    out = np.empty((len(src), g.shape[0]), dtype=np.float64)
+    every = np.arange(graph.shape[0])
+    out = np.empty((len(src), len(every)), dtype=np.float64)
     for lo in range(0, len(src), max(1, chunk)):
         part = src[lo : lo + chunk]
-        out[lo : lo + len(part)] = dijkstra(g, directed=True, indices=part, limit=limit)
+        out[lo : lo + len(part)] = distances_to(graph, part, every, limit)
     return out
 
 
 def distances_to(graph: sp.spmatrix, sources: np.ndarray, points: np.ndarray, limit: float) -> np.ndarray:
     """Graph-geodesic distances from a few sources to a point set, up to ``limit``.
 
-    :func:`distances_from` restricted to ``points``: one radius-limited Dijkstra per
-    source on the worker threads (:func:`intrinsym.geodesics._dijkstra.balls`), which keeps only
-    the points it settles, instead of SciPy's, which holds the GIL and fills every row to
-    the graph's size.
+    One radius-limited Dijkstra per source on the worker threads
+    (:func:`intrinsym.geodesics._dijkstra.balls`), keeping only the points it settles.
 
     Parameters
     ----------
