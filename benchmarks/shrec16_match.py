@@ -12,7 +12,10 @@ Beside it, pyFM from partial to full (PyPI ``pyfmaps``: WKS, ``fit``, ZoomOut 20
 100), and the scores of intrinsym's marginals and modes: per source sample whose true
 and mirror points lie more than 0.10 apart, the share whose first-pass marginal puts
 at least 0.1 of its mass within 0.05 of each ("both modes"), of the true one alone and
-of the mirror one alone; and the two maps of :func:`intrinsym.result.modes.two_modes`:
+of the mirror one alone; whether mode 0 is the true answer (more of the far-apart
+vertices within 0.10 of the true point than of the mirror point; its mean over pairs is
+the frequency mode 0's confidence claims); and the two maps of
+:func:`intrinsym.result.modes.two_modes`:
 per partial vertex whose true and mirror points lie more than 0.10 apart, the share
 where one mode lies within 0.05 (0.10) of the true point and the other of the mirror
 point, both modes holding at least 0.1 of the confidence ("both answers"). Every match
@@ -93,6 +96,7 @@ SCORES = (
     ("answers_010", "both answers ≤0.10", ("intrinsym",)),
     ("answers_005_alone", "both answers ≤0.05, no target symmetry", ("intrinsym",)),
     ("confidence0", "confidence mode 0", ("intrinsym",)),
+    ("mode0_true", "mode 0 is the true answer", ("intrinsym",)),
     ("cut_unmatched", "reverse: cut-away unmatched", ("intrinsym", "reverse")),
     ("kept_matched", "reverse: kept matched", ("intrinsym", "reverse")),
     ("reverse_within_010", "reverse: matched kept ≤0.10", ("intrinsym", "reverse")),
@@ -210,6 +214,19 @@ def both_answers(two: modes.Modes, true: np.ndarray, mirror: np.ndarray, graph, 
     return out
 
 
+def true_answer(two: modes.Modes, true: np.ndarray, mirror: np.ndarray, graph, far: np.ndarray) -> float | None:
+    """1.0 when mode 0 lies within 0.10 of the true point at more of the partial vertices
+    in ``far`` than of the mirror point, 0.0 when at fewer, 0.5 on a tie; None without
+    such vertices. Its mean over pairs is the frequency that mode 0's confidence
+    (``confidence0``) claims: the calibration of the modes' confidences."""
+    if not far.any():
+        return None
+    on_true, on_mirror = (
+        int(np.sum(evaluate.map_errors(two.maps[0], answer, graph)[far] <= 0.10)) for answer in (true, mirror)
+    )
+    return 0.5 if on_true == on_mirror else float(on_true > on_mirror)
+
+
 def run(path: Path, method: str, overrides: Mapping) -> dict:
     """One shape matched to its null shape under ``method`` ("intrinsym" or "pyfm"), or
     its null shape matched to it ("reverse")."""
@@ -250,6 +267,7 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         row["confidence0"], row["confidence1"] = (float(c) for c in two.confidence)
         far_vertices = evaluate.map_errors(true, mirror, graph) > FAR
         held = both_answers(two, true, mirror, graph, far_vertices)
+        row["mode0_true"] = true_answer(two, true, mirror, graph, far_vertices)
         row["answers_005"], row["answers_010"] = held["005"], held["010"]
         alone = modes.two_modes(dataclasses.replace(result, target_symmetry=None))
         row["answers_005_alone"] = both_answers(alone, true, mirror, graph, far_vertices)["005"]
