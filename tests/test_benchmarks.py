@@ -6,13 +6,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import trimesh
 
 import intrinsym
 from conftest import shared
+from intrinsym.result.modes import Modes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import scores  # noqa: E402
+import shrec16_match  # noqa: E402
 import tosca  # noqa: E402
 
 
@@ -223,3 +226,22 @@ def test_unary_partner_tells_the_true_mirror_from_a_random_map(tmp_path, capsys)
     assert lines[2].startswith(f"| m | wks*spin | {true['samples']} | ")
     assert unary_partner.main(["--data", str(tmp_path / "absent")]) == 0
     assert "skipped" in capsys.readouterr().out
+
+
+def test_shrec16_match_tells_which_answer_mode_0_is():
+    """``true_answer`` by hand on a path of six vertices one unit apart, whose true and
+    mirror answers are i and 5 - i: mode 0 on the true answers, on the mirror ones, on
+    half of each (a tie), and with no far-apart vertex."""
+    graph = sp.diags([np.ones(5), np.ones(5)], [1, -1], format="csr")
+    true, mirror = np.arange(6), 5 - np.arange(6)
+    far = np.ones(6, dtype=bool)
+
+    def answer(first: np.ndarray, where: np.ndarray = far) -> float | None:
+        two = Modes(np.stack([first, mirror]), np.zeros((2, 1), np.int64), np.ones(2), np.full(2, 0.5))
+        return shrec16_match.true_answer(two, true, mirror, graph, where)
+
+    assert answer(true) == 1.0
+    assert answer(mirror) == 0.0
+    assert answer(np.array([0, 1, 2, 2, 1, 0])) == 0.5
+    assert answer(np.array([0, 1, 2, 2, 1, 0]), np.array([1, 1, 0, 0, 0, 0], bool)) == 1.0
+    assert answer(true, np.zeros(6, bool)) is None
