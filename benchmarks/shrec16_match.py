@@ -198,32 +198,37 @@ def null_symmetry(path: Path) -> tuple[np.ndarray, float]:
     return vmap, time.perf_counter() - start
 
 
-def both_answers(two: modes.Modes, true: np.ndarray, mirror: np.ndarray, graph, far: np.ndarray) -> dict:
-    """Per partial vertex in ``far``, whether one mode lies within 0.05 (0.10) of the true
-    point and the other within it of the mirror point; 0 without a second mode."""
-    error = {
+def mode_errors(
+    two: modes.Modes, true: np.ndarray, mirror: np.ndarray, graph, far: np.ndarray
+) -> dict[tuple[int, str], np.ndarray]:
+    """Per mode (0, 1) and answer ("true", "mirror"), the geodesic distance from the
+    mode's image of every partial vertex in ``far`` to that answer's point."""
+    return {
         (k, name): evaluate.map_errors(two.maps[k], answer, graph)[far]
         for k in (0, 1)
         for name, answer in (("true", true), ("mirror", mirror))
     }
+
+
+def both_answers(two: modes.Modes, error: dict[tuple[int, str], np.ndarray]) -> dict:
+    """Per partial vertex of :func:`mode_errors`, whether one mode lies within 0.05 (0.10)
+    of the true point and the other within it of the mirror point; 0 without a second mode."""
     out = {}
     for t in (0.05, 0.10):
         straight = (error[0, "true"] <= t) & (error[1, "mirror"] <= t)
         held = straight | ((error[0, "mirror"] <= t) & (error[1, "true"] <= t))
-        out[f"{round(t * 100):03d}"] = float(np.mean(held)) if two.both and far.any() else 0.0
+        out[f"{round(t * 100):03d}"] = float(np.mean(held)) if two.both and len(held) else 0.0
     return out
 
 
-def true_answer(two: modes.Modes, true: np.ndarray, mirror: np.ndarray, graph, far: np.ndarray) -> float | None:
+def true_answer(error: dict[tuple[int, str], np.ndarray]) -> float | None:
     """1.0 when mode 0 lies within 0.10 of the true point at more of the partial vertices
-    in ``far`` than of the mirror point, 0.0 when at fewer, 0.5 on a tie; None without
-    such vertices. Its mean over pairs is the frequency that mode 0's confidence
-    (``confidence0``) claims: the calibration of the modes' confidences."""
-    if not far.any():
+    of :func:`mode_errors` than of the mirror point, 0.0 when at fewer, 0.5 on a tie;
+    None without such vertices. Its mean over pairs is the frequency that mode 0's
+    confidence (``confidence0``) claims: the calibration of the modes' confidences."""
+    if not len(error[0, "true"]):
         return None
-    on_true, on_mirror = (
-        int(np.sum(evaluate.map_errors(two.maps[0], answer, graph)[far] <= 0.10)) for answer in (true, mirror)
-    )
+    on_true, on_mirror = (int(np.sum(error[0, name] <= 0.10)) for name in ("true", "mirror"))
     return 0.5 if on_true == on_mirror else float(on_true > on_mirror)
 
 
@@ -266,11 +271,13 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
         two = modes.two_modes(result)
         row["confidence0"], row["confidence1"] = (float(c) for c in two.confidence)
         far_vertices = evaluate.map_errors(true, mirror, graph) > FAR
-        held = both_answers(two, true, mirror, graph, far_vertices)
-        row["mode0_true"] = true_answer(two, true, mirror, graph, far_vertices)
+        error = mode_errors(two, true, mirror, graph, far_vertices)
+        held = both_answers(two, error)
+        row["mode0_true"] = true_answer(error)
         row["answers_005"], row["answers_010"] = held["005"], held["010"]
         alone = modes.two_modes(dataclasses.replace(result, target_symmetry=None))
-        row["answers_005_alone"] = both_answers(alone, true, mirror, graph, far_vertices)["005"]
+        alone_error = mode_errors(alone, true, mirror, graph, far_vertices)
+        row["answers_005_alone"] = both_answers(alone, alone_error)["005"]
         src = result.source_point_vertex
         far = evaluate.map_errors(true[src], mirror[src], graph) > FAR
         at_true, at_mirror = (m[far] >= MODE_MASS for m in mode_masses(result, true, mirror, graph))

@@ -238,7 +238,7 @@ def test_shrec16_match_tells_which_answer_mode_0_is():
 
     def answer(first: np.ndarray, where: np.ndarray = far) -> float | None:
         two = Modes(np.stack([first, mirror]), np.zeros((2, 1), np.int64), np.ones(2), np.full(2, 0.5))
-        return shrec16_match.true_answer(two, true, mirror, graph, where)
+        return shrec16_match.true_answer(shrec16_match.mode_errors(two, true, mirror, graph, where))
 
     assert answer(true) == 1.0
     assert answer(mirror) == 0.0

@@ -102,10 +102,11 @@ class Surface:
         rows, cols, dists : (nnz,) int64, int64, float64, read-only
             As :func:`~intrinsym.geodesics._dijkstra.ball_pairs` returns them.
         """
-        key = (np.asarray(sources, dtype=np.int64).tobytes(), float(limit))
+        sources = np.asarray(sources, dtype=np.int64)
+        key = (sources.tobytes(), float(limit))
         if key not in self._balls:
             self._balls.clear()
-            triples = ball_pairs(csr_arrays(self.graph), np.asarray(sources, dtype=np.int64), limit)
+            triples = ball_pairs(csr_arrays(self.graph), sources, limit)
             for a in triples:
                 a.setflags(write=False)
             self._balls[key] = triples

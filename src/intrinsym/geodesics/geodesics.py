@@ -258,9 +258,9 @@ def unit_area_graph(shape: Shape) -> tuple[Shape, np.ndarray, sp.csr_matrix]:
 def distances_from(graph: sp.spmatrix, sources: np.ndarray, limit: float = np.inf, chunk: int = 256) -> np.ndarray:
     """Graph-geodesic distances from a few sources to every vertex.
 
-    :func:`distances_to` every vertex: SciPy's ``dijkstra`` gives the same distances to
-    the last bit (tests/test_geodesics.py) but holds the GIL, so its searches ran one at
-    a time.
+    The searches of :func:`distances_to`, to every vertex, the graph's arrays built once
+    for all chunks: SciPy's ``dijkstra`` gives the same distances to the last bit
+    (tests/test_geodesics.py) but holds the GIL, so its searches ran one at a time.
 
     Parameters
     ----------
@@ -278,12 +278,13 @@ def distances_from(graph: sp.spmatrix, sources: np.ndarray, limit: float = np.in
     (m, N) float64
         Distances in length units; ``inf`` beyond ``limit`` or where unreachable.
     """
+    arrays = csr_arrays(graph)
+    every = np.arange(len(arrays[0]) - 1, dtype=np.int64)
     src = np.asarray(sources, dtype=np.int64).ravel()
-    every = np.arange(graph.shape[0])
     out = np.empty((len(src), len(every)), dtype=np.float64)
     for lo in range(0, len(src), max(1, chunk)):
         part = src[lo : lo + chunk]
-        out[lo : lo + len(part)] = distances_to(graph, part, every, limit)
+        out[lo : lo + len(part)] = _settled(arrays, part, every, len(every), limit)
     return out
 
 
@@ -314,10 +315,17 @@ def distances_to(graph: sp.spmatrix, sources: np.ndarray, points: np.ndarray, li
     label[pts] = np.arange(len(pts))
     if len(np.unique(pts)) != len(pts):
         raise ValueError("points must be distinct vertices")
-    src = np.asarray(sources, dtype=np.int64).ravel()
-    counts, cols, dists = balls(indptr, indices, weights, src, label, float(limit))
-    out = np.full((len(src), len(pts)), np.inf)
-    out[np.repeat(np.arange(len(src)), counts), cols] = dists
+    return _settled((indptr, indices, weights), np.asarray(sources, dtype=np.int64).ravel(), label, len(pts), limit)
+
+
+def _settled(
+    arrays: tuple[np.ndarray, np.ndarray, np.ndarray], sources: np.ndarray, label: np.ndarray, n: int, limit: float
+) -> np.ndarray:
+    """(m, n) distances from ``sources`` to the ``n`` labelled vertices (``label``: -1
+    for none) within ``limit`` (:func:`~intrinsym.geodesics._dijkstra.balls`), inf elsewhere."""
+    counts, cols, dists = balls(*arrays, sources, label, float(limit))
+    out = np.full((len(sources), n), np.inf)
+    out[np.repeat(np.arange(len(sources)), counts), cols] = dists
     return out
 
 
