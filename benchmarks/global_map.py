@@ -50,7 +50,7 @@ from intrinsym.globalmap.confidence import calibration, map_mass, mass_within, s
 from intrinsym.globalmap.globalmap import best_spectral, cell_mass, choose, zoomout_map
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import Shape, clean, surface_area
-from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
+from intrinsym.pipeline import extract_result, min_vertices, sample_pair
 from intrinsym.surface import prepare
 from intrinsym.unary import unary
 from tosca import cases
@@ -187,7 +187,7 @@ def measure(name: str, data: Path | None, saved: Path | None) -> tuple[dict, dic
     row: dict = {"shape": name, "negative": negative, "seconds": time.perf_counter() - t0}
     argmax = result.marginals.argmax(axis=1)
     row["argmax_share"] = consistency(argmax, graph, targets, tolerance)
-    surf = prepare(mesh, _min_vertices(p))
+    surf = prepare(mesh, min_vertices(p))
     ps, pt = sample_pair(surf, surf, p)
     row["long_range"] = long_range_agreement(surf.graph, ps, pt[argmax])
     sym = extraction.global_symmetry

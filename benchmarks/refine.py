@@ -32,7 +32,7 @@ import intrinsym
 from _data import add_data_argument, data_folder, no_data
 from intrinsym.evaluation import evaluate
 from intrinsym.globalmap.globalmap import refined_map
-from intrinsym.pipeline import _min_vertices, extract_result, sample_pair
+from intrinsym.pipeline import extract_result, min_vertices, sample_pair
 from intrinsym.surface import prepare
 from tosca import cases, select
 
@@ -58,7 +58,7 @@ def measure(case, saved: Path, settings: list[tuple[int, float]], exact: bool = 
     if (start < 0).all():
         return None
     p = result.params
-    surf = prepare(mesh, _min_vertices(p))
+    surf = prepare(mesh, min_vertices(p))
     ps, pt = sample_pair(surf, surf, p)
     spacing = result.info.resolved.target_spacing
     row: dict = {"shape": case.name, "before": _scores(start, mesh, truth)}

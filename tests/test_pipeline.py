@@ -22,6 +22,7 @@ from intrinsym.mrf import bp
 from intrinsym.params import MAP_MARGIN
 from intrinsym.result.runinfo import FORMAT_VERSION
 from intrinsym.spectral import laplacian
+from intrinsym.surface import serves
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
 
@@ -324,10 +325,10 @@ def test_a_detect_on_a_prepared_surface_is_the_detect_on_the_path(spot_result, s
 def test_a_prepared_surface_serves_the_counts_of_its_working_size(spot):
     # spot has 2930 vertices: counts up to 1465 need no subdivision, the default 4000 targets do
     small = intrinsym.prepare(spot, n_source=40, n_target=400)
-    assert not small.subdivided and pipeline.serves(small, pipeline._min_vertices(intrinsym.make_params(n_target=1400)))
+    assert not small.subdivided and serves(small, pipeline.min_vertices(intrinsym.make_params(n_target=1400)))
     fine = intrinsym.prepare(spot)
     assert fine.subdivided and len(fine.shape.vertices) >= fine.min_vertices == 8000
-    assert pipeline.serves(fine, 8000) and not pipeline.serves(fine, 800)
+    assert serves(fine, 8000) and not serves(fine, 800)
     with pytest.raises(intrinsym.ParameterError, match=r"prepared for a working size of 8000 vertices.*need 800"):
         intrinsym.detect(fine, intrinsym.make_params(**SMALL))
     with pytest.raises(intrinsym.ParameterError, match="need 8000"):

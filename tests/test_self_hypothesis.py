@@ -13,7 +13,6 @@ from scipy.sparse.csgraph import dijkstra
 
 import intrinsym
 from conftest import shared
-from intrinsym import pipeline
 from intrinsym.app import cli
 from intrinsym.evaluation import partial_truth
 from intrinsym.extract import part_mask
@@ -21,6 +20,7 @@ from intrinsym.globalmap import part_hypothesis, part_map, self_hypothesis
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays
 from intrinsym.params import Params
+from intrinsym.pipeline import self_matching
 from intrinsym.surface import prepare
 
 
@@ -150,7 +150,7 @@ def test_a_global_map_that_is_the_trivial_match_gives_way(monkeypatch, tmp_path,
         shares.append(radius)
         return 0.9
 
-    monkeypatch.setattr(pipeline, "fixed_share", stays_put)
+    monkeypatch.setattr(self_matching, "fixed_share", stays_put)
     result = intrinsym.detect((g.vertices, g.faces), small)
     assert shares == [small.trivial_radius]  # asked once, of the global map
     assert result.global_symmetry is None and result.info.global_map is None and result.map_distortion is None

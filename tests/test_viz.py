@@ -9,8 +9,8 @@ import trimesh
 from matplotlib.image import imread
 
 from conftest import cli_run, sphere_result
+from intrinsym import Result
 from intrinsym.app import viz
-from intrinsym.pipeline import Result
 
 
 @pytest.mark.parametrize("up", ["x", "y", "z"])

@@ -350,7 +350,7 @@ def descriptor_steps(mesh: str, p: Params) -> tuple[int, dict[str, float]]:
         seconds[name] = seconds.get(name, 0.0) + time.perf_counter() - t0
         return out
 
-    surf = prepare(as_shape(mesh), pipeline._min_vertices(p))
+    surf = prepare(as_shape(mesh), pipeline.min_vertices(p))
     ps, pt = pipeline.sample_pair(surf, surf, p)
     v, f = surf.shape.vertices, surf.shape.faces
     timed("laplacian", laplacian.laplace_beltrami, v, f)

@@ -22,7 +22,7 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 
 from ...errors import ParameterError
-from ...pipeline import _model_bytes
+from ...pipeline.stages import model_bytes
 from ...resources import available_memory, format_bytes
 from .items import Item
 from .rows import base_row
@@ -83,12 +83,12 @@ def _count(n: int | None, spacing: float | None) -> int:
 
 def item_bytes(item: Item) -> int:
     """Estimated peak memory of one item: the model's arrays
-    (:func:`intrinsym.pipeline._model_bytes`, about three source edges per sample) with a
+    (:func:`intrinsym.pipeline.stages.model_bytes`, about three source edges per sample) with a
     margin, plus the worker's base."""
     p = item.params
     n_s, n_t = _count(p.n_source, p.source_spacing), _count(p.n_target, p.target_spacing)
     passes = p.passes if p.passes is not None else 1 if item.target is None else 2
-    model = _model_bytes(n_s, n_t, 3 * n_s, np.dtype(p.dtype).itemsize, passes)
+    model = model_bytes(n_s, n_t, 3 * n_s, np.dtype(p.dtype).itemsize, passes)
     return WORKER_BASE_BYTES + MODEL_MARGIN * model
 
 

@@ -1,0 +1,42 @@
+"""What a run starts from: its parameters resolved and checked against the machine,
+its working size and its samples."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from ..errors import ParameterError
+from ..mrf import bp
+from ..params import WORK_PER_SAMPLE, Params, make_params
+from ..surface import Surface, sample
+
+
+def resolve_params(params: Params | None, preset: str, **common: Any) -> Params:
+    """``params`` (or the preset's) with the common keywords that are not None applied."""
+    if params is not None and preset != "default":
+        raise ParameterError("give params or a preset, not both")
+    base = params if params is not None else make_params(preset)
+    return dataclasses.replace(base, **{k: v for k, v in common.items() if v is not None})
+
+
+def check_machine(p: Params) -> None:
+    """Raise :class:`ParameterError` when this machine cannot run ``p`` (a GPU backend
+    without a GPU, or with a schedule it does not run)."""
+    if p.backend == "gpu":
+        try:
+            bp.resolve_backend(p.backend, p.schedule)
+        except ValueError as err:
+            raise ParameterError(str(err)) from None
+
+
+def min_vertices(p: Params) -> int:
+    return WORK_PER_SAMPLE * max(p.n_source or 0, p.n_target or 0)
+
+
+def sample_pair(src: Surface, tgt: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Working vertices of the source samples (on ``src``, seed ``p.seed + 1``) and of the
+    target samples (on ``tgt``, seed ``p.seed``): those of a run with parameters ``p``."""
+    return sample(src, p.n_source, p.source_spacing, p.seed + 1), sample(tgt, p.n_target, p.target_spacing, p.seed)
