@@ -33,6 +33,9 @@ def check_machine(p: Params) -> None:
 
 
 def min_vertices(p: Params) -> int:
+    """The working size ``p`` asks for: a mesh with fewer vertices is subdivided until it
+    has this many (``WORK_PER_SAMPLE`` times the larger sample count; 0 when neither is
+    given)."""
     return WORK_PER_SAMPLE * max(p.n_source or 0, p.n_target or 0)
 
 
