@@ -42,6 +42,8 @@ def test_paper_preset_keeps_the_papers_unary():
         (dict(unary_floor=0.0), "unary_floor"),
         (dict(calibration_k=0), "calibration_k"),
         (dict(calibration="median"), "calibration must"),
+        (dict(partial_calibration="median"), "partial_calibration must"),
+        (dict(row_width=0.0), "row_width"),
         (dict(eigenpairs=1), "eigenpairs"),
         (dict(eigen_coarse=-1), "eigen_coarse"),
     ],
@@ -247,3 +249,21 @@ def test_a_constant_descriptor_gives_finite_positive_potentials():
         phi = unary.calibrated_potential([distances, zero], [scale, scale])
         assert np.isfinite(phi).all() and (phi > 0).all()
         np.testing.assert_array_equal(phi, np.where(distances == 0, 1.0, 1e-3))
+
+
+def test_row_potential_by_hand():
+    """Each row's distances from its nearest target in units of width x the spread to its
+    median one: row [0.5, 0.6, 0.7, 0.9, 1.0], width 0.25, sigma 0.25 x 0.2 = 0.05."""
+    d = np.array([[0.5, 0.6, 0.7, 0.9, 1.0]])
+    phi = unary.row_potential([d], 0.25, floor=1e-6)
+    np.testing.assert_allclose(phi, [[1.0, np.exp(-2.0), np.exp(-8.0), 1e-6, 1e-6]])
+    phi = np.maximum(phi, 1e-3)  # the default floor
+    # scale-free per row and per factor; factors multiply; a constant row gives 1
+    rows = np.vstack([d, 1000.0 * d, np.full((1, 5), 0.3)])
+    both = unary.row_potential([rows, rows[::-1].copy()], 0.25)
+    np.testing.assert_allclose(both[0], phi[0])  # d, and the constant row
+    np.testing.assert_allclose(both[1], np.maximum(phi[0] ** 2, 1e-3))  # 1000 d twice
+    np.testing.assert_allclose(both[2], phi[0])
+    for bad in ({"width": 0.0}, {"width": -1.0}, {"width": 0.2, "floor": 1.0}):
+        with pytest.raises(ValueError):
+            unary.row_potential([d], **bad)

@@ -25,7 +25,7 @@ Schedule = Literal["auto", "colour", "serial", "residual", "flooding"]
 Backend = Literal["auto", "cpu", "gpu"]
 DType = Literal["float32", "float64"]
 Potential = Literal["calibrated", "paper"]
-Calibration = Literal["local", "both", "offset", "descriptor"]
+Calibration = Literal["local", "both", "offset", "descriptor", "row"]
 MatchScale = Literal["auto", "larger", "each"]
 
 #: Unary descriptor terms selectable by name; "a*b" multiplies their potentials.
@@ -184,10 +184,26 @@ class Params:
         "how each calibrated width sigma is measured: 'offset', the median descriptor distance from "
         "points to the 3 targets nearest them on the surface; 'descriptor', to the --calibration-k "
         "nearest targets in descriptor space; 'both', the larger; 'local', 'both' raised per source "
-        "sample to its own offset spread (self-matching)",
+        "sample to its own offset spread (self-matching); 'row', each source sample's distances from its "
+        "nearest target in descriptor space, in --row-width times their spread to its median one",
         "unary",
     )
+    partial_calibration: Calibration = _p(
+        "row",
+        f"--calibration of a match whose smaller shape has less than {PARTIAL_AREA} of the larger's area (a "
+        "part matched to a whole): between a part and a whole in another pose a true match lies only "
+        "slightly nearer in descriptor space than the rest, and widths measured on the whole leave the "
+        "unary flat",
+        "unary",
+        match_only=True,
+    )
     calibration_k: int = _p(7, "nearest targets in descriptor space of the 'descriptor' rule", "unary")
+    row_width: float = _p(
+        0.2,
+        "width of the 'row' rule's Gaussian, in units of a source sample's spread of descriptor distances "
+        "from its nearest target to its median one",
+        "unary",
+    )
     unary_floor: float = _p(1e-3, "smallest calibrated unary potential, in (0, 1)", "unary")
     rho: float = _p(0.4, "truncation rho of the pairwise term (Eq. 6)", "pairwise", paper="0.4")
     tolerance: float = _p(
@@ -440,6 +456,7 @@ class Params:
             (self.eigen_coarse < 0, "eigen_coarse must be at least 0"),
             (not 2 <= self.energies <= MAX_ENERGIES, f"energies must lie in [2, {MAX_ENERGIES}]"),
             (self.calibration_k < 1, "calibration_k must be at least 1"),
+            (not self.row_width > 0, "row_width must be positive"),
             (
                 self.n_target is not None and self.calibration_k > self.n_target,
                 f"calibration_k must be at most n_target ({self.n_target})",

@@ -38,9 +38,10 @@ def match(
 
     When the smaller shape has less than ``PARTIAL_AREA`` of the larger's area it is taken
     for a part of it: both are measured in one unit, sqrt(area) of the larger, so that
-    the part keeps its size, and the unary is ``params.partial_unary`` (the result's
-    ``params.unary`` says which ran; a part's Laplace-Beltrami spectrum, and so its WKS,
-    is not the whole's). Otherwise each is normalised to unit area, so near-isometric
+    the part keeps its size, and the unary is ``params.partial_unary`` calibrated as
+    ``params.partial_calibration`` says (the result's ``params.unary`` and
+    ``params.calibration`` say which ran; a part's Laplace-Beltrami spectrum, and so its
+    WKS, is not the whole's). Otherwise each is normalised to unit area, so near-isometric
     frames of one object match whatever their units (``params.match_scale`` decides).
     Parameters as in :func:`detect`; the trivial match does not apply.
 
@@ -93,7 +94,7 @@ def match(
     area_a, area_b = surface_area(surf_a.shape), surface_area(surf_b.shape)
     part = min(area_a, area_b) < PARTIAL_AREA
     if part:
-        p = dataclasses.replace(p, unary=p.partial_unary)
+        p = dataclasses.replace(p, unary=p.partial_unary, calibration=p.partial_calibration)
     clock.lap("prepare")
     target_part = part and area_b < area_a
     p_ab = part_target_params(p, area_b / area_a) if target_part else p
@@ -179,8 +180,9 @@ def _match_header(a: Shape, b: Shape, preset: str, part: bool) -> dict:
 #: spacings of the part's images (:func:`invert_part_match`): a map that collapses the
 #: part onto a small region leaves the rest of the whole unmatched. Fewer leave more of
 #: the part's counterpart unmatched, more cover more of what was cut away: on the 125
-#: SHREC'16 shapes 1.5 leaves 0.920 of the cut-away vertices unmatched (every class
-#: >= 0.882), 2 0.897 (michael 0.861), 3 0.849 (docs/results.md's reach table).
+#: SHREC'16 shapes 1.5 leaves 0.888 of the cut-away vertices unmatched (every class
+#: >= 0.871) and matches 0.639 of the kept ones, 2 0.870 / 0.666, 3 0.852 / 0.690
+#: (docs/results.md's reach table).
 COVER_SPACINGS = 1.5
 
 
@@ -213,7 +215,7 @@ def invert_part_match(back: Result, part: ShapeLike, whole: ShapeLike, spacings:
     spacing = float(np.median(back.support.edge_length)) * back.info.resolved.scale  # input units
     # The extraction's map even where the part's match kept the partial functional map:
     # inverted, that one left 0.768 of the cut-away vertices unmatched on the 125 SHREC'16
-    # pairs, against 0.920 (and matched 0.618 of the kept ones, against 0.348)
+    # pairs, against 0.888 (and matched 0.618 of the kept ones, against 0.639)
     return inverse_vertex_map(
         back.extraction_map(),
         sw.vertices,

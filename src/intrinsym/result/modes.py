@@ -9,8 +9,8 @@ symmetry. Given the target's own symmetry map (``Result.target_symmetry``, e.g. 
 matched to it), mode 1 is that symmetry applied after mode 0. Without it, mode 1 is the
 best map that sends most source samples far from where mode 0 does: the best-ranked
 extracted symmetry of that kind, else each sample's strongest target away from mode 0's
-image; BP's marginals hold the second answer only faintly (docs/limitations.md), and
-this map is right on far fewer vertices than the composed one. Each mode gets a
+image; BP's first pass mostly settles on one answer (docs/limitations.md), and this
+map is right on far fewer vertices than the composed one. Each mode gets a
 quality from the model itself, which does not favour a mode because BP settled on it
 (the mean unary at the mode's images times the share of source edges whose length the
 mode keeps), and the two confidences are the qualities' shares: a symmetric pair gets

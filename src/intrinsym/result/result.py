@@ -182,6 +182,20 @@ class Result:
             out.append((marginals, unary))
         return out
 
+    def mixed_marginals(self) -> np.ndarray:
+        """(S, T) float64: every BP pass's marginals, each row normalised to sum 1,
+        averaged over the passes.
+
+        Each pass is BP settled on one mode (a further pass removes the earlier passes'
+        argmax from the unary): matching a part to a symmetric whole, the first pass
+        often settles on the true answer and the second on its mirror, or the other way
+        round. The mixture holds every mode found, each with the same weight; with one
+        pass it is the marginals, normalised.
+        """
+        stack = [self.marginals, *([] if self.pass_marginals is None else self.pass_marginals)]
+        rows = [np.asarray(m, dtype=np.float64) for m in stack]
+        return np.mean([m / np.maximum(m.sum(axis=1, keepdims=True), np.finfo(np.float64).tiny) for m in rows], axis=0)
+
     def symmetry_map(self) -> np.ndarray:
         """(N_in,) int64: the image of every input vertex under the dominant symmetry
         (``symmetry_map.npy``; :attr:`intrinsym.extract.symmetry.Extraction.dominant_index`: the
