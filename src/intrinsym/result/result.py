@@ -192,9 +192,10 @@ class Result:
         round. The mixture holds every mode found, each with the same weight; with one
         pass it is the marginals, normalised.
         """
-        stack = [self.marginals, *([] if self.pass_marginals is None else self.pass_marginals)]
-        rows = [np.asarray(m, dtype=np.float64) for m in stack]
-        return np.mean([m / np.maximum(m.sum(axis=1, keepdims=True), np.finfo(np.float64).tiny) for m in rows], axis=0)
+        later = () if self.pass_marginals is None else tuple(self.pass_marginals)
+        passes = [np.asarray(m, dtype=np.float64) for m in (self.marginals, *later)]
+        tiny = np.finfo(np.float64).tiny
+        return np.mean([m / np.maximum(m.sum(axis=1, keepdims=True), tiny) for m in passes], axis=0)
 
     def symmetry_map(self) -> np.ndarray:
         """(N_in,) int64: the image of every input vertex under the dominant symmetry

@@ -177,19 +177,15 @@ def row_potential(distances: list[np.ndarray], width: float, floor: float = 1e-3
     (S, T) float64 array, values in [floor, 1]; 1 at each row's nearest target of a
     single factor, and everywhere on a row whose distances are all equal.
     """
-    if not distances:
-        raise ValueError("give at least one distance matrix")
     if not width > 0:
         raise ValueError(f"width must be positive, got {width}")
-    if not 0 < floor < 1:
-        raise ValueError(f"floor must lie in (0, 1), got {floor}")
-    exponent = np.zeros(np.shape(distances[0]), dtype=np.float64)
+    shifted, scales = [], []
     for d in distances:
         d = np.asarray(d, dtype=np.float64)
         nearest = d.min(axis=1, keepdims=True)
-        spread = np.maximum(np.median(d, axis=1, keepdims=True) - nearest, SMALLEST_SCALE)
-        exponent += ((d - nearest) / (width * spread)) ** 2 / 2.0
-    return np.maximum(np.exp(-exponent), floor)
+        shifted.append(d - nearest)
+        scales.append(width * np.maximum(np.median(d, axis=1, keepdims=True) - nearest, SMALLEST_SCALE))
+    return calibrated_potential(shifted, scales, floor)
 
 
 def spin_images_at(surface: Surface, vertices: np.ndarray, radius: float, p: Params) -> np.ndarray:
