@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from intrinsym.geodesics.geodesics import SparseDistances
-from intrinsym.mrf.model import lambda_for_tolerance, pairwise_dense, suppress_peaks, suppress_trivial, truncation_width
+from intrinsym.mrf.model import (
+    condition_on_images,
+    lambda_for_tolerance,
+    pairwise_dense,
+    suppress_peaks,
+    suppress_trivial,
+    truncation_width,
+)
 from intrinsym.spectral.laplacian import eigenpairs
 from intrinsym.unary.descriptors import wave_kernel_signature, wks_energies
 from intrinsym.unary.unary import calibrated_potential, descriptor_scale, nmi_potential, potential_floor, row_scales
@@ -51,8 +58,8 @@ def test_weighted_trivial_match_peaks_at_the_weight_times_the_rows_best_elsewher
     assert low[0, 1] == 0.15  # not below the floor
 
 
-def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
-    # targets on a line at 0, 0.03, 0.06, 0.1, 0.3; distances kept up to 0.12
+def _line_targets() -> SparseDistances:
+    """Targets on a line at 0, 0.03, 0.06, 0.1, 0.3; distances kept up to 0.12."""
     x = np.array([0.0, 0.03, 0.06, 0.1, 0.3])
     d = np.abs(x[:, None] - x[None, :])
     ptr, idx, dist = [0], [], []
@@ -62,7 +69,11 @@ def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
         idx.extend(keep)
         dist.extend(row[keep])
         ptr.append(len(idx))
-    targets = SparseDistances(np.array(ptr), np.array(idx), np.array(dist), 0.12)
+    return SparseDistances(np.array(ptr), np.array(idx), np.array(dist), 0.12)
+
+
+def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
+    targets = _line_targets()
     unary = np.full((2, 5), 0.5)
     marg = np.array([[0.1, 0.5, 0.2, 0.1, 0.1], [0.0, 0.1, 0.1, 0.2, 0.6]])
     out = suppress_peaks(unary, marg, targets, 0.05, 0.01)
@@ -70,6 +81,25 @@ def test_suppress_peaks_floors_the_targets_near_each_rows_argmax():
     assert np.all(unary == 0.5)  # input untouched
     with pytest.raises(ValueError, match="suppression needs"):
         suppress_peaks(unary, marg, targets, 0.2, 0.01)
+
+
+def test_condition_on_images_keeps_each_row_near_its_image_by_hand():
+    targets = _line_targets()
+    unary = np.array([[0.5, 0.002, 0.4, 0.8, 0.9], [0.2, 0.2, 0.2, 0.2, 0.2], [0.3, 0.1, 0.6, 0.7, 0.9]])
+    out = condition_on_images(unary, np.array([1, 4, -1]), targets, 0.03, 0.01)
+    g = np.exp(-0.5 * (np.array([0.03, 0.0, 0.03, 0.07]) / 0.03) ** 2)
+    beyond = np.exp(-0.5 * (0.12 / 0.03) ** 2)  # 0.3 lies beyond the reach 0.12 of target 1
+    # row 0: the floor 0.01 lifts 0.002 first, then each target's Gaussian of its distance from 0.03
+    assert out[0] == pytest.approx([0.5 * g[0], 0.01 * g[1], 0.4 * g[2], 0.8 * g[3], 0.9 * beyond])
+    assert out[1] == pytest.approx([0.2 * beyond] * 4 + [0.2])  # only target 4 lies within 0.12 of 0.3
+    assert out[2].tolist() == unary[2].tolist()  # no image: kept
+    assert unary[0, 1] == 0.002  # input untouched
+    narrow = condition_on_images(unary.astype(np.float32), np.array([1, 4, -1]), targets, 0.001, 0.01)
+    assert narrow.dtype == np.float32 and narrow.min() == np.finfo(np.float32).tiny  # exp(-1800) underflows
+    with pytest.raises(ValueError, match="width"):
+        condition_on_images(unary, np.array([1, 4, -1]), targets, 0.0, 0.01)
+    with pytest.raises(ValueError, match="one image per row"):
+        condition_on_images(unary, np.array([1, 4]), targets, 0.03, 0.01)
 
 
 def test_row_scales_are_each_rows_median_over_its_near_targets():

@@ -251,6 +251,13 @@ class Params:
         "bp",
     )
     pass_radius: float = _p(0.08, "radius about each row's argmax that a further pass removes", "bp", unit=AREA)
+    mode_width: float = _p(
+        1.0,
+        "width of the Gaussian about each mode's images that BP given the mode keeps (a match's mode marginals)",
+        "bp",
+        unit="target spacings",
+        match_only=True,
+    )
     remove_trivial: bool = _p(
         True,
         "weaken the trivial match (targets within --trivial-radius of the source sample) to --trivial-weight",
@@ -441,6 +448,7 @@ class Params:
             (not self.mass_radius > 0, "mass_radius must be positive"),
             (self.passes is not None and self.passes < 1, "passes must be at least 1"),
             (self.pass_radius <= 0, "pass_radius must be positive"),
+            (not self.mode_width > 0, "mode_width must be positive"),
             *(
                 (
                     any(t not in UNARY_TERMS for t in terms) or len(set(terms)) < len(terms),

@@ -163,3 +163,48 @@ def suppress_peaks(
         row = slice(targets.indptr[peak], targets.indptr[peak + 1])
         out[s, targets.indices[row][targets.dist[row] <= radius]] = floor
     return out
+
+
+def condition_on_images(
+    unary: np.ndarray, images: np.ndarray, targets: SparseDistances, width: float, floor: float
+) -> np.ndarray:
+    """The unary of BP conditioned on one answer: each row kept near the answer's image.
+
+    Loopy BP settles on about one mode, and not always on a right one; given a map (a
+    mode of the match), BP run on this unary gives the marginals of that mode: each
+    target's floored unary times the Gaussian exp(-d^2 / (2 width^2)) of its geodesic
+    distance d from the row's image, d taken as the reach of ``targets`` beyond it, and
+    never below the smallest normal number of ``unary``'s dtype (BP takes only positive
+    potentials). Rows without an image (-1) are kept as they are.
+
+    Parameters
+    ----------
+    unary : (S, T) array
+    images : (S,) int
+        Target of every source sample under the answer, -1 for none.
+    targets : SparseDistances
+        Target-target geodesics.
+    width : float
+        Positive, in the units of ``targets``.
+    floor : float
+        The unary's floor: every target keeps at least it before the Gaussian.
+
+    Returns
+    -------
+    (S, T) array of ``unary``'s dtype, a new array.
+    """
+    if not width > 0:
+        raise ValueError(f"width must be positive, got {width}")
+    unary = np.asarray(unary)
+    images = np.asarray(images)
+    if images.shape != (unary.shape[0],):
+        raise ValueError(f"need one image per row ({unary.shape[0]}), got shape {images.shape}")
+    beyond = np.exp(-0.5 * (targets.radius / width) ** 2)
+    out = np.maximum(unary.astype(np.float64), floor)
+    for s in np.flatnonzero(images >= 0):
+        row = slice(targets.indptr[images[s]], targets.indptr[images[s] + 1])
+        prior = np.full(unary.shape[1], beyond)
+        prior[targets.indices[row]] = np.exp(-0.5 * (targets.dist[row] / width) ** 2)
+        out[s] *= prior
+    out = np.maximum(out, np.finfo(unary.dtype).tiny)
+    return np.where(images[:, None] >= 0, out, unary).astype(unary.dtype)

@@ -137,6 +137,28 @@ class BPOutcome:
     identity: IdentityDecision | None
 
 
+def run_bp(mrf: model.MRF, p: Params, progress: ProgressCallback | None) -> bp.BPResult:
+    """BP on ``mrf`` with the schedule, iterations, tolerance, damping, seed, dtype and
+    backend of ``p``, each iteration reported to ``progress``."""
+
+    def on_iteration(it: int, change: float) -> None:
+        log.debug("bp iteration %d: max message change %.3g", it, change)
+        if progress is not None:
+            progress(BPIteration(it, change, p.iterations))
+
+    return bp.belief_propagation(
+        mrf,
+        p.schedule,
+        p.iterations,
+        p.bp_tol,
+        p.damping,
+        p.seed,
+        np.dtype(p.dtype).type,
+        on_iteration,
+        backend=p.backend,
+    )
+
+
 def solve_bp(
     mrf: model.MRF,
     phi: np.ndarray,
@@ -156,29 +178,11 @@ def solve_bp(
     if weight is None:
         weight = 0.0 if p.trivial_weight == "auto" else float(p.trivial_weight)
 
-    def on_iteration(it: int, change: float) -> None:
-        log.debug("bp iteration %d: max message change %.3g", it, change)
-        if progress is not None:
-            progress(BPIteration(it, change, p.iterations))
-
-    def run(mrf: model.MRF) -> bp.BPResult:
-        return bp.belief_propagation(
-            mrf,
-            p.schedule,
-            p.iterations,
-            p.bp_tol,
-            p.damping,
-            p.seed,
-            np.dtype(p.dtype).type,
-            on_iteration,
-            backend=p.backend,
-        )
-
     weakened = (
         model.suppress_trivial(phi, near, p.trivial_radius, floor, weight) if trivial and near is not None else phi
     )
     mrf = dataclasses.replace(mrf, unary=weakened.astype(np.float32))
-    runs = [run(mrf)]
+    runs = [run_bp(mrf, p, progress)]
     first_unary = mrf.unary
     marginals = runs[0].marginals.astype(np.float32)
     passes: list[tuple[np.ndarray, np.ndarray]] = []
@@ -190,7 +194,7 @@ def solve_bp(
                 mrf.unary, (passes[-1][0] if passes else marginals), mrf.targets, p.pass_radius, floor
             ),
         )
-        runs.append(run(mrf))
+        runs.append(run_bp(mrf, p, progress))
         passes.append((runs[-1].marginals.astype(np.float32), mrf.unary))
     return BPOutcome(first_unary, marginals, passes, runs, IdentityDecision(weight) if trivial else None)
 

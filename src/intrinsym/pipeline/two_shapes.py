@@ -13,13 +13,16 @@ from ..globalmap.part_chain import part_vertex_map
 from ..globalmap.part_map import choose_part_map
 from ..globalmap.vertex_maps import inverse_vertex_map
 from ..mesh.shape import Shape, surface_area, vertex_areas
+from ..mrf import model
 from ..params import PARTIAL_AREA, Params
 from ..problem import sampled
 from ..progress import ProgressCallback
+from ..result.modes import two_modes
 from ..result.result import Result
+from ..result.runinfo import PassStats
 from ..surface import ShapeLike, Surface, as_shape, prepare_pair, serves
 from .inputs import check_machine, min_vertices, resolve_params, sample_pair
-from .stages import Clock, solve
+from .stages import Clock, run_bp, solve
 
 
 def match(
@@ -79,6 +82,11 @@ def match(
     A ``detect`` of B takes about as long as a match; run it once and give it to every
     match onto B.
 
+    Every match ends with BP given each of its two modes (``mode_marginals``, the stage
+    ``mode marginals``: two more BP runs, see :func:`_with_mode_marginals`);
+    :meth:`~intrinsym.result.result.Result.mixed_marginals` mixes them by the modes'
+    confidences.
+
     Raises
     ------
     ParameterError
@@ -104,11 +112,11 @@ def match(
     result = solve(problem, p_ab, clock, _match_header(sa, sb, preset, part))
     result = dataclasses.replace(result, target_symmetry=symmetry)
     if not part:
-        return result
+        return _with_mode_marginals(result, clock)
     if not target_part:
         result = _with_part_map(result, surf_a, surf_b, (sa, sb), p)
         clock.lap("part map")
-        return dataclasses.replace(result, info=dataclasses.replace(result.info, seconds=dict(clock.seconds)))
+        return _with_mode_marginals(result, clock)
     # The target is the part: every source sample takes a label, so the source vertices
     # cut away on the target would get one too. The part's own match to the whole (what
     # match(b, a) computes) covers those that have a counterpart; the rest get -1.
@@ -117,8 +125,8 @@ def match(
     image = invert_part_match(back, sb, sa)
     _, stats = choose_part_map(back.extraction_map(), surf_b, surf_a)
     clock.lap("reverse match")
-    info = dataclasses.replace(result.info, seconds=dict(clock.seconds), target_part=True, part_map=stats)
-    return dataclasses.replace(result, global_map=image, info=info)
+    info = dataclasses.replace(result.info, target_part=True, part_map=stats)
+    return _with_mode_marginals(dataclasses.replace(result, global_map=image, info=info), clock)
 
 
 def part_target_params(p: Params, share: float) -> Params:
@@ -169,6 +177,37 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
     image, stats = part_vertex_map(result.symmetry_map(), part, whole, given, p)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
+
+
+def _with_mode_marginals(result: Result, clock: Clock) -> Result:
+    """A match's result with its marginals given each of its two modes
+    (``mode_marginals``, ``info.bp.modes``; the stage ``mode marginals``).
+
+    Loopy BP settles on about one mode, and on a part matched to its whole not always on
+    a right one where the vertex map is; BP run again on the unary conditioned on each
+    mode's sample images (:func:`~intrinsym.mrf.model.condition_on_images`, a Gaussian of
+    ``mode_width`` target spacings) gives each mode's marginals, and
+    :meth:`~intrinsym.result.result.Result.mixed_marginals` mixes them by the modes'
+    confidences.
+    """
+    p = result.params
+    two = two_modes(result)
+    mrf = result.mrf()
+    width = p.mode_width * result.info.resolved.target_spacing
+    floor = result.info.resolved.unary_floor
+    marginals, stats = [], []
+    for images in two.images:
+        if not (images >= 0).any():
+            marginals.append(np.asarray(result.marginals, dtype=np.float32))
+            continue
+        unary = model.condition_on_images(mrf.unary, images, mrf.targets, width, floor)
+        run = run_bp(dataclasses.replace(mrf, unary=unary), p, clock.progress)
+        marginals.append(run.marginals.astype(np.float32))
+        stats.append(PassStats(run.iterations, run.converged, run.max_change))
+    clock.lap("mode marginals")
+    bp_stats = dataclasses.replace(result.info.bp, modes=tuple(stats))
+    info = dataclasses.replace(result.info, bp=bp_stats, seconds=dict(clock.seconds))
+    return dataclasses.replace(result, mode_marginals=np.stack(marginals), info=info)
 
 
 def _match_header(a: Shape, b: Shape, preset: str, part: bool) -> dict:

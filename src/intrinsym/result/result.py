@@ -101,6 +101,12 @@ class Result:
         given to :func:`intrinsym.pipeline.match`: the second of the two modes
         (:func:`intrinsym.result.modes.two_modes`) is it applied after the first; None
         when none was given (and for ``detect``).
+    mode_marginals : (2, S, T) float32 or None
+        A match's marginals given each of its two modes
+        (:func:`intrinsym.result.modes.two_modes`): BP on the unary conditioned on the
+        mode's sample images (:func:`intrinsym.mrf.model.condition_on_images`,
+        ``Params.mode_width``); a mode without images is BP's first pass. None for
+        ``detect`` and for a result of an earlier version.
     """
 
     source_points: np.ndarray
@@ -118,6 +124,7 @@ class Result:
     pass_marginals: np.ndarray | None = None
     map_distortion: np.ndarray | None = None
     target_symmetry: np.ndarray | None = None
+    mode_marginals: np.ndarray | None = None
 
     #: Every file of the result set (:meth:`save` writes those the result has).
     FILES: ClassVar[tuple[str, ...]] = (
@@ -183,19 +190,25 @@ class Result:
         return out
 
     def mixed_marginals(self) -> np.ndarray:
-        """(S, T) float64: every BP pass's marginals, each row normalised to sum 1,
-        averaged over the passes.
+        """(S, T) float64: the marginals of every mode, each row normalised to sum 1, mixed.
 
-        Each pass is BP settled on one mode (a further pass removes the earlier passes'
-        argmax from the unary): matching a part to a symmetric whole, the first pass
-        often settles on the true answer and the second on its mirror, or the other way
-        round. The mixture holds every mode found, each with the same weight; with one
-        pass it is the marginals, normalised.
+        A match (``mode_marginals``): each mode's marginals weighted by the mode's
+        confidence (:func:`~intrinsym.result.modes.two_modes`), the posterior of a source
+        sample when the match is one mode or the other. Otherwise every BP pass's
+        marginals with the same weight: each pass is BP settled on one mode (a further
+        pass removes the earlier passes' argmax from the unary); with one pass it is the
+        marginals, normalised.
         """
-        later = () if self.pass_marginals is None else tuple(self.pass_marginals)
-        passes = [np.asarray(m, dtype=np.float64) for m in (self.marginals, *later)]
         tiny = np.finfo(np.float64).tiny
-        return np.mean([m / np.maximum(m.sum(axis=1, keepdims=True), tiny) for m in passes], axis=0)
+        if self.mode_marginals is not None:
+            weights = two_modes(self).confidence
+            parts = [np.asarray(m, dtype=np.float64) for m in self.mode_marginals]
+        else:
+            later = () if self.pass_marginals is None else tuple(self.pass_marginals)
+            parts = [np.asarray(m, dtype=np.float64) for m in (self.marginals, *later)]
+            weights = np.full(len(parts), 1.0 / len(parts))
+        normed = np.stack([m / np.maximum(m.sum(axis=1, keepdims=True), tiny) for m in parts])
+        return np.tensordot(weights, normed, axes=1)
 
     def symmetry_map(self) -> np.ndarray:
         """(N_in,) int64: the image of every input vertex under the dominant symmetry
@@ -409,6 +422,8 @@ class Result:
             arrays["map_distortion"] = np.asarray(self.map_distortion, dtype=np.float32)
         if self.target_symmetry is not None:
             arrays["target_symmetry"] = np.asarray(self.target_symmetry, dtype=np.int64)
+        if self.mode_marginals is not None:
+            arrays["mode_marginals"] = np.asarray(self.mode_marginals, dtype=np.float32)
         run = self.run_json()
 
         def write_json(content: Any, indent: int | None = None) -> Writer:
@@ -485,6 +500,7 @@ class Result:
                 )
                 global_map, pass_marginals = get("global_map"), get("pass_marginals")
                 map_distortion, target_symmetry = get("map_distortion"), get("target_symmetry")
+                mode_marginals = get("mode_marginals")
         except _UNREADABLE as err:
             reason = "missing" if isinstance(err, FileNotFoundError) else f"{type(err).__name__}: {err}"
             raise ResultError(f"{name}: cannot read it ({reason}); run intrinsym detect again") from None
@@ -498,6 +514,7 @@ class Result:
             pass_marginals=pass_marginals,
             map_distortion=map_distortion,
             target_symmetry=target_symmetry,
+            mode_marginals=mode_marginals,
         )
 
 
@@ -519,6 +536,7 @@ def _shapes(sizes: Sizes) -> dict[str, tuple[int | str, ...]]:
         "global_map": ("N",),
         "map_distortion": ("N",),
         "target_symmetry": ("M",),
+        "mode_marginals": (2, s, t),
         "edge_length": (e,),
         "vertex_source": ("N",),
         "vertex_target": ("M",),

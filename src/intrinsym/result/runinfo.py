@@ -117,6 +117,9 @@ class BPStats:
     seconds_per_iteration, setup_seconds : float
     message_updates : int
     passes : tuple of PassStats
+    modes : tuple of PassStats
+        BP given each mode of a match (``Result.mode_marginals``), for the modes that
+        have images.
     schedule : str
         The schedule that ran ("auto" resolved; empty in a run.json written before
         it was recorded).
@@ -132,6 +135,7 @@ class BPStats:
     message_updates: int
     passes: tuple[PassStats, ...] = ()
     schedule: str = ""
+    modes: tuple[PassStats, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -308,6 +312,7 @@ class RunInfo:
         bp = dict(run["bp"])
         bp["history"] = tuple(bp.get("history", ()))
         bp["passes"] = tuple(PassStats(**q) for q in bp.get("passes", ()))
+        bp["modes"] = tuple(PassStats(**q) for q in bp.get("modes", ()))
         identity = run.get("identity")
         if identity and version < 3:
             identity = {k: v for k, v in identity.items() if k not in _ROUND_TRIP_KEYS}
