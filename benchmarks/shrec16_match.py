@@ -10,8 +10,8 @@ mean (over mapped vertices; an unmapped vertex counts as a miss in the shares).
 
 Beside it, pyFM from partial to full (PyPI ``pyfmaps``: WKS, ``fit``, ZoomOut 20 ->
 100), and the scores of intrinsym's marginals and modes: per source sample whose true
-and mirror points lie more than 0.10 apart, the share whose marginal (the mean of the
-BP passes', :meth:`intrinsym.Result.mixed_marginals`) puts at least 0.1 of its mass
+and mirror points lie more than 0.10 apart, the share whose marginal (the marginals
+given each mode, mixed: :meth:`intrinsym.Result.mixed_marginals`) puts at least 0.1 of its mass
 within 0.05 of each ("both modes"), of the true one alone and
 of the mirror one alone; whether mode 0 is the true answer (more of the far-apart
 vertices within 0.10 of the true point than of the mirror point; its mean over pairs is
@@ -122,8 +122,8 @@ def pyfm_match(partial: intrinsym.Shape, null: intrinsym.Shape) -> np.ndarray:
 
 
 def mode_masses(result: intrinsym.Result, true: np.ndarray, mirror: np.ndarray, graph) -> tuple[np.ndarray, np.ndarray]:
-    """Per source sample, the passes' mean marginal mass within :data:`MODE_RADIUS` of its
-    true and of its mirror point.
+    """Per source sample, the mixed marginals' mass (:meth:`intrinsym.Result.mixed_marginals`)
+    within :data:`MODE_RADIUS` of its true and of its mirror point.
 
     Parameters
     ----------
