@@ -1,7 +1,9 @@
 """A self-contained interactive HTML viewer of a saved result (``intrinsym view OUT``).
 
 One file, no network access needed: the page (``static/viewer.html``, a small
-hand-written WebGL2 viewer) gets the mesh, the marginals, the per-vertex weights of
+hand-written WebGL2 viewer) gets the mesh, the marginals
+(:meth:`~intrinsym.result.result.Result.mixed_marginals`: a match's two modes, each
+with its confidence), the per-vertex weights of
 Eq. 9, the symmetries and the run's parameters and scores inlined as zlib-compressed
 base64 arrays, which the browser inflates with its built-in ``DecompressionStream``.
 
@@ -372,7 +374,7 @@ def payload(
         "positions": pack(shape.vertices.astype(np.float32)),
         "faces": pack(shape.faces.astype(np.uint32)),
         "source_points": pack(result.source_points.astype(np.float32)),
-        "marginals": pack(quantize_rows(result.marginals)),
+        "marginals": pack(quantize_rows(result.mixed_marginals())),
         **_weight_data(result, shape, k),
         **_symmetry_data(symmetries if self_match else [], shape.vertices),
         "initial_source": viz.default_source(result),

@@ -223,7 +223,7 @@ def default_source(result: Result) -> int:
     maximum) at a target farther than a quarter of sqrt(area) from itself, so that
     the figure shows a non-trivial image. Two-shape matching: the most peaked marginal.
     """
-    m = result.marginals.astype(np.float64)
+    m = result.mixed_marginals()
     m = m / np.maximum(m.max(axis=1, keepdims=True), np.finfo(float).tiny)
     if result.info.mode == "detect":
         far = 0.25 * float(result.info.resolved.scale)
@@ -273,7 +273,9 @@ def marginal_figure(
     params: FigureParams = FigureParams(),
     source_shape: Shape | None = None,
 ) -> Path:
-    """PNG of the continuous marginal (Eq. 9) of one source sample on the target shape.
+    """PNG of the continuous marginal (Eq. 9) of one source sample on the target shape:
+    :meth:`~intrinsym.result.result.Result.mixed_marginals`, so that a match shows both
+    its modes.
 
     Parameters
     ----------
@@ -289,7 +291,7 @@ def marginal_figure(
     """
     sigma = params.sigma or target_spacing(result.target_points)
     index, weight = gaussian_weights(shape.vertices, result.target_points, sigma)
-    value = continuous_marginal(index, weight, result.marginals[source])
+    value = continuous_marginal(index, weight, result.mixed_marginals()[source])
     from matplotlib.colors import LinearSegmentedColormap
 
     rgb = LinearSegmentedColormap.from_list("heat", HEAT)(value)[:, :3]
