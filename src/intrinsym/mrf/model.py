@@ -200,11 +200,11 @@ def condition_on_images(
     if images.shape != (unary.shape[0],):
         raise ValueError(f"need one image per row ({unary.shape[0]}), got shape {images.shape}")
     beyond = np.exp(-0.5 * (targets.radius / width) ** 2)
-    out = np.maximum(unary.astype(np.float64), floor)
+    tiny = np.finfo(unary.dtype).tiny
+    out = np.array(unary, copy=True)
     for s in np.flatnonzero(images >= 0):
         row = slice(targets.indptr[images[s]], targets.indptr[images[s] + 1])
         prior = np.full(unary.shape[1], beyond)
         prior[targets.indices[row]] = np.exp(-0.5 * (targets.dist[row] / width) ** 2)
-        out[s] *= prior
-    out = np.maximum(out, np.finfo(unary.dtype).tiny)
-    return np.where(images[:, None] >= 0, out, unary).astype(unary.dtype)
+        out[s] = np.maximum(np.maximum(unary[s].astype(np.float64), floor) * prior, tiny)
+    return out
