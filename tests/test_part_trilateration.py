@@ -57,12 +57,12 @@ def test_the_search_is_the_dense_argmin(step) -> None:
     on_part[on_part >= reach] = np.inf
     on_whole[rng.random(on_whole.shape) < 0.1] = np.inf  # beyond the whole's horizon
     start = rng.integers(-1, n_whole, n_part)
-    found = part_trilateration.best_images(on_part, on_whole, reach, start)
+    found = part_trilateration.best_images(on_part, np.ascontiguousarray(on_whole.T), reach, start)
     assert np.array_equal(found, _dense_best(on_part, on_whole, reach, start))
     # a vertex with no image that only infinite costs could locate keeps none
     on_whole[:, 0] = np.inf
     on_part[:, 0] = 0.1
-    alone = part_trilateration.best_images(on_part, on_whole, reach, np.full(n_part, -1))
+    alone = part_trilateration.best_images(on_part, np.ascontiguousarray(on_whole.T), reach, np.full(n_part, -1))
     assert alone[0] == -1 and np.array_equal(alone, _dense_best(on_part, on_whole, reach, np.full(n_part, -1)))
 
 

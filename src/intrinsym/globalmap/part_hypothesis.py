@@ -263,6 +263,6 @@ def hypothesis_maps(
         # anchor's image it is located from, up to the change allowed
         images = distances_from(whole_graph, target_of[chosen], limit=2.0 * TRILATERATION_REACH)
         start = np.full(len(vertices_p), -1, dtype=np.int64)
-        located = best_images(on_part[anchor_of[chosen]], np.ascontiguousarray(images.T), TRILATERATION_REACH, start)
+        located = best_images(on_part[anchor_of[chosen]], images, TRILATERATION_REACH, start)
         maps.append(input_map(located, part, whole))
     return maps
