@@ -36,11 +36,21 @@ unmatched (-1), of the kept ones matched, and of the matched kept ones within 0.
 nearer answer; and the same shares at other reaches of the inversion (:data:`REACHES`,
 the margin of ``COVER_SPACINGS``), in a second table. With ``--reverse`` the script also
 times ``match(null, partial)`` itself (method "reverse": its seconds and stages, and the
-same reverse scores of the map it returns). Command::
+same reverse scores of the map it returns).
+
+With ``--truth`` (method "truth") the script also weighs the true map as ``match`` weighs
+its candidate maps of a part (:func:`intrinsym.globalmap.part_map.least_distorted`: the
+share of the part's short geodesic distances a map changes, on the meshes ``match``
+prepares), the lower of the true and the mirror answer's (each partial vertex sent to the
+null vertex nearest its point), beside the share of the map ``match`` kept; a line under
+the table counts the pairs within 0.10 on less than :data:`RIGHT` of their vertices on
+which the true map changes fewer of them by more than :data:`MARGIN` (the search never
+offered it: the test would have kept it) and those on which it does not (the test would
+not keep it). Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/shrec16_match.py --data DATA [--cache DIR --tag TAG]
         [--shapes cuts_cat holes ...] [--jobs N] [--param NAME=VALUE ...] [--no-pyfm] [--reverse]
-        [-o TABLE.md]
+        [--truth] [-o TABLE.md]
 
 ``DATA`` holds ``shrec16_partial/`` (default ``$INTRINSYM_DATA``; skipped, exit 0, when
 absent). ``--shapes`` and ``--cache`` as in ``benchmarks/partial.py`` (one JSON file per
@@ -66,9 +76,12 @@ from scipy.spatial import cKDTree
 
 import intrinsym
 from intrinsym.evaluation import evaluate, partial_truth
+from intrinsym.globalmap.part_map import least_distorted
 from intrinsym.mesh.shape import surface_area
 from intrinsym.pipeline import COVER_SPACINGS, invert_part_match
+from intrinsym.pipeline.inputs import min_vertices
 from intrinsym.result import modes
+from intrinsym.surface import prepare_pair
 from partial import _group, _value, confidence_row, run_script
 from tosca import score_histogram
 
@@ -85,6 +98,13 @@ KEPT, CUT = partial_truth.PARTNERED, partial_truth.UNPARTNERED
 #: The inversion's reaches (sample spacings) scored: the default's and others (its margin).
 REACHES = (1.0, 1.5, 2.0, 3.0, 4.0, float("inf"))
 assert COVER_SPACINGS in REACHES
+#: Scores whose worst is the highest.
+LOWER_IS_BETTER = ("mean_error", "kept_changed", "truth_changed", "seconds")
+#: A pair's map is wrong when it is within 0.10 on less than this share of the vertices...
+RIGHT = 0.80
+#: ... and the test that keeps a part's map would have kept the true map when that changes
+#: fewer of the part's short distances than the kept map by more than this share.
+MARGIN = 0.01
 #: Scores of a row, with their table headers; the methods that have them.
 SCORES = (
     ("within_005", "≤0.05", ("intrinsym", "pyfm")),
@@ -101,6 +121,8 @@ SCORES = (
     ("cut_unmatched", "reverse: cut-away unmatched", ("intrinsym", "reverse")),
     ("kept_matched", "reverse: kept matched", ("intrinsym", "reverse")),
     ("reverse_within_010", "reverse: matched kept ≤0.10", ("intrinsym", "reverse")),
+    ("kept_changed", "kept map: distances changed", ("intrinsym",)),
+    ("truth_changed", "true map: distances changed", ("truth",)),
     ("seconds", "seconds", ("intrinsym", "pyfm", "reverse")),
 )
 
@@ -247,6 +269,12 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
     row: dict = {"shape": path.stem, "class": _group(path.stem)[1], "method": method, "vertices": n}
     start = time.perf_counter()
     result = None
+    if method == "truth":
+        params = intrinsym.make_params(**overrides)
+        part, whole = prepare_pair(shape, null, min_vertices(params), params.match_scale)
+        row["truth_changed"] = least_distorted([true, mirror], part, whole)[1]
+        row["seconds"] = time.perf_counter() - start
+        return row
     if method == "reverse":
         result = intrinsym.match(null, shape, intrinsym.make_params(**overrides))
         row["seconds"] = time.perf_counter() - start
@@ -311,8 +339,8 @@ def run(path: Path, method: str, overrides: Mapping) -> dict:
 def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[str]) -> str:
     """The table: a row per shape, then mean and worst per kind, per class and overall;
     then the reverse scores at every reach (:func:`reach_table`)."""
-    # the reverse scores at the default reach
-    rows = {k: {**r, **r.get("reaches", {}).get(str(COVER_SPACINGS), {})} for k, r in rows.items()}
+    # the reverse scores at the default reach, the kept map's share of changed distances
+    rows = {k: {**r, **r.get("reaches", {}).get(str(COVER_SPACINGS), {}), **_kept(r)} for k, r in rows.items()}
     columns = [(key, m) for key, _, have in SCORES for m in methods if m in have]
     labels = {key: label for key, label, _ in SCORES}
     head = ["shape", *(f"{labels[key]} ({m})" for key, m in columns)]
@@ -322,8 +350,8 @@ def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[
         out = []
         for key, m in columns:
             values = np.array([_value(rows.get((n, m)), key) for n in members])
-            # worst: the lowest share, the highest error or time
-            agg = np.nanmax if key in ("mean_error", "seconds") else np.nanmin
+            # worst: the lowest share, the highest error, share of distances changed or time
+            agg = np.nanmax if key in LOWER_IS_BETTER else np.nanmin
             out.append("–" if np.all(np.isnan(values)) else f"{(agg if worst else np.nanmean)(values):.3f}")
         return out
 
@@ -338,8 +366,39 @@ def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[
         if len(members) > 1:
             lines.append("| " + " | ".join([f"**mean {g}** ({len(members)})", *cells(members, False)]) + " |")
             lines.append("| " + " | ".join([f"worst {g}", *cells(members, True)]) + " |")
+    if "truth" in methods:
+        lines += ["", search_or_test(rows, names)]
     lines += ["", reach_table(rows, names) if "intrinsym" in methods else ""]
     return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def _kept(row: dict) -> dict:
+    """``{"kept_changed": share}``: the share of the part's short distances the map
+    ``match`` kept changes (its ``part_map_distortion`` under ``part_map_final``); empty
+    without one."""
+    final = row.get("part_map_final")
+    share = row.get("part_map_distortion", {}).get(final) if final else None
+    return {} if share is None else {"kept_changed": share}
+
+
+def search_or_test(rows: dict[tuple[str, str], dict], names: list[str]) -> str:
+    """The line that says what failed on the pairs whose map is wrong (within 0.10 on
+    less than :data:`RIGHT` of the vertices): the search, where the true map changes fewer
+    of the part's short distances than the kept map by more than :data:`MARGIN` (the test
+    would have kept it), or the test, where it does not. ``rows`` as :func:`markdown`
+    reads them (``kept_changed`` merged in)."""
+    search, test = [], []
+    for n in names:
+        mine, truth = rows.get((n, "intrinsym")), rows.get((n, "truth"))
+        if mine is None or truth is None or "kept_changed" not in mine or _value(mine, "within_010") >= RIGHT:
+            continue
+        (search if truth["truth_changed"] < mine["kept_changed"] - MARGIN else test).append(n)
+    return (
+        f"Pairs within 0.10 on less than {RIGHT:.2f} of their vertices: {len(search) + len(test)}. "
+        f"The true map changes fewer of the part's short distances than the kept map (by more than "
+        f"{MARGIN:g}) on {len(search)}: the search never offered it ({', '.join(search) or 'none'}); "
+        f"not on {len(test)}: the test would not keep it ({', '.join(test) or 'none'}).\n"
+    )
 
 
 def reach_table(rows: dict[tuple[str, str], dict], names: list[str]) -> str:
@@ -372,7 +431,10 @@ def main(argv: list[str] | None = None) -> int:
         markdown,
         "within_010",
         cache_folder="match",
-        optional={"reverse": "also time match(null, partial) itself and score the map it returns"},
+        optional={
+            "reverse": "also time match(null, partial) itself and score the map it returns",
+            "truth": "also weigh the true map as match weighs a part's maps, beside the kept one",
+        },
     )
 
 
