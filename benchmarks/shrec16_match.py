@@ -389,10 +389,12 @@ def search_or_test(rows: dict[tuple[str, str], dict], names: list[str]) -> str:
     reads them (``kept_changed`` merged in)."""
     search, test = [], []
     for n in names:
-        mine, truth = rows.get((n, "intrinsym")), rows.get((n, "truth"))
-        if mine is None or truth is None or "kept_changed" not in mine or _value(mine, "within_010") >= RIGHT:
+        mine = rows.get((n, "intrinsym"))
+        kept, true = _value(mine, "kept_changed"), _value(rows.get((n, "truth")), "truth_changed")
+        # nan: no row, a failed run or no part map; not a wrong pair
+        if np.isnan(kept) or np.isnan(true) or not _value(mine, "within_010") < RIGHT:
             continue
-        (search if truth["truth_changed"] < mine["kept_changed"] - MARGIN else test).append(n)
+        (search if true < kept - MARGIN else test).append(n)
     return (
         f"Pairs within 0.10 on less than {RIGHT:.2f} of their vertices: {len(search) + len(test)}. "
         f"The true map changes fewer of the part's short distances than the kept map (by more than "

@@ -250,7 +250,8 @@ def test_shrec16_match_tells_which_answer_mode_0_is():
 def test_shrec16_match_tells_search_from_test():
     """``search_or_test`` by hand: of three wrong pairs, the true map changes fewer
     distances than the kept map by more than the margin on one (the search), by less on
-    one and more on one (the test); a right pair and one without a truth row are left out."""
+    one and more on one (the test); a right pair, one without a truth row and one whose
+    truth run failed are left out."""
 
     def mine(within: float, changed: float) -> dict:
         return {"within_010": within, "part_map_final": "polished", "part_map_distortion": {"polished": changed}}
@@ -265,10 +266,12 @@ def test_shrec16_match_tells_search_from_test():
         ("d", "intrinsym"): mine(0.9, 0.30),
         ("d", "truth"): {"truth_changed": 0.00},
         ("e", "intrinsym"): mine(0.1, 0.30),
+        ("f", "intrinsym"): mine(0.1, 0.30),
+        ("f", "truth"): {"error": "a failed run"},
     }
     rows = {k: {**r, **shrec16_match._kept(r)} for k, r in raw.items()}
     assert rows["a", "intrinsym"]["kept_changed"] == 0.10 and "kept_changed" not in rows["a", "truth"]
-    line = shrec16_match.search_or_test(rows, ["a", "b", "c", "d", "e"])
+    line = shrec16_match.search_or_test(rows, ["a", "b", "c", "d", "e", "f"])
     assert "vertices: 3." in line
     assert "on 1: the search never offered it (a);" in line
     assert "not on 2: the test would not keep it (b, c)." in line
