@@ -231,9 +231,10 @@ class Params:
     )
     iterations: int = _p(100, "maximum BP iterations T", "bp", paper="100")
     bp_tol: float = _p(
-        3e-3,
-        "stop BP when the largest change of a max-normalised message is below this (the marginals' and map's "
-        "scores on TOSCA are those of 1e-4, in a third fewer iterations)",
+        1e-2,
+        "stop BP when the largest change of a max-normalised message is below this (the mean scores of "
+        "3e-3 within 0.004 on the 36 complete shapes and the 125 SHREC'16 shapes and pairs, with 0.71x the "
+        "BP iterations on the complete ones)",
         "bp",
     )
     damping: float = _p(0.0, "message damping, in [0, 1)", "bp")
