@@ -45,19 +45,30 @@ def _dense_best(on_part, on_whole, reach, start):
 
 
 @pytest.mark.parametrize("step", [0.0, 0.125], ids=["continuous", "ties"])
-def test_the_search_is_the_dense_argmin(step) -> None:
+@pytest.mark.parametrize("n_whole", [300, 31], ids=["blocks", "one-block"])
+def test_the_search_is_the_dense_argmin(step, n_whole) -> None:
     """Against the dense search, on random distances and on distances rounded to 1/8
-    (many exact ties, and sums exact in any order)."""
+    (many exact ties, and sums exact in any order); the whole's vertices a few blocks
+    and a last partial one, or fewer than one block, each block's first and last
+    vertices planted as the answer."""
     rng = np.random.default_rng(0)
-    n_anchors, n_part, n_whole, reach = 12, 60, 300, 0.5
+    n_anchors, n_part, reach = 12, 60, 0.5
     on_part = rng.uniform(0.0, 0.8, (n_anchors, n_part))
     on_whole = rng.uniform(0.0, 1.0, (n_whole, n_anchors))
     if step:
         on_part, on_whole = np.round(on_part / step) * step, np.round(on_whole / step) * step
     on_part[on_part >= reach] = np.inf
     on_whole[rng.random(on_whole.shape) < 0.1] = np.inf  # beyond the whole's horizon
+    # part vertices 1-4 repeat the distances of the whole's first vertex, of the two
+    # either side of a block's end and of its last vertex exactly: found at cost 0
+    planted = np.unique([0, 31, 32, n_whole - 1] if n_whole > 32 else [0, n_whole - 1])
+    for x, y in enumerate(planted, start=1):
+        on_whole[y, :4] = np.minimum(on_whole[y, :4], 0.25)  # at least four anchors within reach
+        on_part[:, x] = np.where(on_whole[y] < reach, on_whole[y], np.inf)
     start = rng.integers(-1, n_whole, n_part)
+    start[1 : len(planted) + 1] = (planted + 1) % n_whole
     found = part_trilateration.best_images(on_part, np.ascontiguousarray(on_whole.T), reach, start)
+    assert np.array_equal(found[1 : len(planted) + 1], planted)
     assert np.array_equal(found, _dense_best(on_part, on_whole, reach, start))
     # a vertex with no image that only infinite costs could locate keeps none
     on_whole[:, 0] = np.inf
