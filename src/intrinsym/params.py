@@ -389,8 +389,8 @@ class Params:
     part_hypotheses: int = _p(
         1,
         "with part_fmap, the hypotheses drawn from consistent clusters of spin-image matches "
-        "(game-theoretic matching) and weighed against the part's kept map: each costs "
-        "3.5-7 s on a SHREC'16 pair on two cores; 0 draws none",
+        "(game-theoretic matching) and weighed against the part's kept map: one costs "
+        "1.5-2.3 s of a SHREC'16 pair alone on two cores; 0 draws none",
         "global map",
         paper="0",
         match_only=True,
