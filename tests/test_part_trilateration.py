@@ -45,7 +45,9 @@ def _dense_best(on_part, on_whole, reach, start):
 
 
 @pytest.mark.parametrize("step", [0.0, 0.125], ids=["continuous", "ties"])
-@pytest.mark.parametrize("n_whole", [300, 31], ids=["blocks", "one-block"])
+@pytest.mark.parametrize(
+    "n_whole", [9 * part_trilateration._BLOCK + 12, part_trilateration._BLOCK - 1], ids=["blocks", "one-block"]
+)
 def test_the_search_is_the_dense_argmin(step, n_whole) -> None:
     """Against the dense search, on random distances and on distances rounded to 1/8
     (many exact ties, and sums exact in any order); the whole's vertices a few blocks
@@ -59,9 +61,10 @@ def test_the_search_is_the_dense_argmin(step, n_whole) -> None:
         on_part, on_whole = np.round(on_part / step) * step, np.round(on_whole / step) * step
     on_part[on_part >= reach] = np.inf
     on_whole[rng.random(on_whole.shape) < 0.1] = np.inf  # beyond the whole's horizon
-    # part vertices 1-4 repeat the distances of the whole's first vertex, of the two
-    # either side of a block's end and of its last vertex exactly: found at cost 0
-    planted = np.unique([0, 31, 32, n_whole - 1] if n_whole > 32 else [0, n_whole - 1])
+    # part vertices from 1 on repeat the distances of the whole's first vertex, of the two
+    # either side of the first block's end and of its last vertex exactly: found at cost 0
+    block = part_trilateration._BLOCK
+    planted = np.unique([0, block - 1, block, n_whole - 1] if n_whole > block else [0, n_whole - 1])
     for x, y in enumerate(planted, start=1):
         on_whole[y, :4] = np.minimum(on_whole[y, :4], 0.25)  # at least four anchors within reach
         on_part[:, x] = np.where(on_whole[y] < reach, on_whole[y], np.inf)
