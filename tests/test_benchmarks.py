@@ -14,6 +14,7 @@ from conftest import shared
 from intrinsym.result.modes import Modes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+import compare  # noqa: E402
 import scores  # noqa: E402
 import shrec16_match  # noqa: E402
 import tosca  # noqa: E402
@@ -275,3 +276,60 @@ def test_shrec16_match_tells_search_from_test():
     assert "vertices: 3." in line
     assert "on 1: the search never offered it (a);" in line
     assert "not on 2: the test would not keep it (b, c)." in line
+
+
+def _results(folder: Path, scores: dict, metric: str = "balanced") -> Path:
+    folder.mkdir()
+    for shape, value in scores.items():
+        (folder / f"{shape}.intrinsym.json").write_text(json.dumps({"shape": shape, metric: value}))
+    return folder
+
+
+def test_compare_by_hand(tmp_path, capsys):
+    """Two runs and a seed pair of four shapes, every number of the table by hand: the
+    means, the change of the mean, the shapes past --within each way and the mean
+    absolute change, per kind and over all; a shape one run lacks is left out."""
+    before = _results(tmp_path / "a", {"cuts_x_1": 0.5, "cuts_x_2": 0.9, "holes_x_1": 0.2, "holes_x_2": 0.4})
+    after = _results(tmp_path / "b", {"cuts_x_1": 0.8, "cuts_x_2": 0.9, "holes_x_1": 0.1, "holes_x_2": 0.404, "z": 1})
+    seed = _results(tmp_path / "s", {"cuts_x_1": 0.6, "cuts_x_2": 0.9, "holes_x_1": 0.2, "holes_x_2": 0.4})
+    assert compare.main([str(before), str(after), "--spread", str(before), str(seed)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[2] == "| cuts (2) | 0.700 | 0.850 | +0.150 | 1 | 0 | 0.150 |"
+    assert lines[3] == "| holes (2) | 0.300 | 0.252 | -0.048 | 0 | 1 | 0.052 |"
+    assert lines[4] == "| **all** (4) | 0.500 | 0.551 | +0.051 | 1 | 1 | 0.101 |"
+    assert lines[5] == "| seed only (4) | 0.500 | 0.525 | +0.025 | 1 | 0 | 0.025 |"
+    assert lines[7] == "Largest moves down: holes_x_1 0.200 -> 0.100"
+    assert lines[8] == "Largest moves up: cuts_x_1 0.500 -> 0.800"
+    assert lines[9].startswith("The change of the mean is 2.0 times the seed's (+0.051 against +0.025)")
+    assert lines[9].endswith("shapes moved by more than 0.01: 2 against the seed's 1.")
+
+
+def test_compare_reads_the_match_folder_and_its_metric(tmp_path, capsys):
+    for name, value in (("a", 0.5), ("b", 0.75)):
+        (tmp_path / name).mkdir()
+        _results(tmp_path / name / "match", {"cuts_x_1": value}, metric="within_010")
+    assert compare.main([str(tmp_path / "a"), str(tmp_path / "b")]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("| within_010 |") and "| **all** (1) | 0.500 | 0.750 | +0.250 | 1 | 0 | 0.250 |" in out
+
+
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["MISSING", "A"], "MISSING: not a folder"),
+        (["EMPTY", "A"], "EMPTY: no *.intrinsym.json results"),
+        (["A", "B", "--metric", "seconds"], "--metric seconds: not in the results"),
+        (["A", "C"], "no shape in both runs"),
+        (["A", "B", "--shapes", "holes"], "no shape in both runs among --shapes"),
+        (["A", "B", "--within", "-1"], "--within -1.0: must be at least 0"),
+    ],
+)
+def test_compare_bad_input_is_one_line_exit_2(tmp_path, capsys, args, named):
+    _results(tmp_path / "A", {"cuts_x_1": 0.5})
+    _results(tmp_path / "B", {"cuts_x_1": 0.6})
+    _results(tmp_path / "C", {"cuts_x_2": 0.6})
+    (tmp_path / "EMPTY").mkdir()
+    folders = {name: str(tmp_path / name) for name in ("A", "B", "C", "EMPTY", "MISSING")}
+    assert compare.main([folders.get(a, a) for a in args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("compare.py: ") and named in err[0]
