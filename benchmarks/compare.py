@@ -4,7 +4,7 @@ On the partial shapes one shape's outcome is a draw: the default ``detect`` at s
 moves 76 of the 125 shapes by more than 0.01 (balanced, by 0.090 on average) and the mean
 by 0.018 (docs/limitations.md). A change earns its place only beyond that. This script
 reads the per-shape caches that ``benchmarks/partial.py`` and ``benchmarks/shrec16_match.py``
-write (``DIR/<shape>.<method>.json``; the match's under ``CACHE/match``) and prints, per
+write (one JSON row per shape and method; the match's under ``CACHE/match``) and prints, per
 kind (cuts / holes) and over the shapes both runs hold: the mean of a score before and
 after, how many shapes gain or lose more than ``--within``, the mean absolute change,
 and the largest moves. ``--spread A B`` adds the same row for two runs that differ only
@@ -69,15 +69,18 @@ class Change:
         return int(np.sum(self.delta < -self.within))
 
     @property
+    def scored(self) -> np.ndarray:
+        """The changes of the shapes both runs scored."""
+        return self.delta[np.isfinite(self.delta)]
+
+    @property
     def mean_change(self) -> float:
         """Change in the mean, over the shapes both runs scored."""
-        both = np.isfinite(self.delta)
-        return float(np.mean(self.delta[both])) if both.any() else float("nan")
+        return float(np.mean(self.scored)) if len(self.scored) else float("nan")
 
     @property
     def mean_abs_change(self) -> float:
-        both = np.isfinite(self.delta)
-        return float(np.mean(np.abs(self.delta[both]))) if both.any() else float("nan")
+        return float(np.mean(np.abs(self.scored))) if len(self.scored) else float("nan")
 
     def subset(self, keep: np.ndarray) -> Change:
         return Change(self.shapes[keep], self.before[keep], self.after[keep], self.within)
@@ -85,29 +88,27 @@ class Change:
 
 def load_results(folder: Path, method: str) -> dict[str, dict]:
     """Per shape, the cached result of ``method`` in ``folder`` (or in its ``match``
-    subfolder, where ``shrec16_match.py`` writes).
+    subfolder, where ``shrec16_match.py`` writes), keyed by the rows' own ``shape``.
 
     Raises
     ------
     CompareError
-        The folder holds no such results.
+        The folder holds no such results, or a file that is not one.
     """
     if not folder.is_dir():
         raise CompareError(f"{folder}: not a folder")
     for where in (folder, folder / "match"):
-        files = sorted(where.glob(f"*.{method}.json"))
-        if files:
-            break
-    else:
-        raise CompareError(f"{folder}: no *.{method}.json results")
-    rows = {}
-    for f in files:
-        try:
-            row = json.loads(f.read_text())
-        except (OSError, ValueError) as error:
-            raise CompareError(f"{f}: not a readable result ({error})") from None
-        rows[f.name[: -len(f".{method}.json")]] = row
-    return rows
+        rows = {}
+        for f in sorted(where.glob("*.json")):
+            try:
+                row = json.loads(f.read_text())
+            except (OSError, ValueError) as error:
+                raise CompareError(f"{f}: not a readable result ({error})") from None
+            if row.get("method") == method:
+                rows[row["shape"]] = row
+        if rows:
+            return rows
+    raise CompareError(f"{folder}: no results of {method}")
 
 
 def pick_metric(rows: dict[str, dict], metric: str | None) -> str:

@@ -281,7 +281,9 @@ def test_shrec16_match_tells_search_from_test():
 def _results(folder: Path, scores: dict, metric: str = "balanced") -> Path:
     folder.mkdir()
     for shape, value in scores.items():
-        (folder / f"{shape}.intrinsym.json").write_text(json.dumps({"shape": shape, metric: value}))
+        (folder / f"{shape}.intrinsym.json").write_text(
+            json.dumps({"shape": shape, "method": "intrinsym", metric: value})
+        )
     return folder
 
 
@@ -317,7 +319,7 @@ def test_compare_reads_the_match_folder_and_its_metric(tmp_path, capsys):
     "args, named",
     [
         (["MISSING", "A"], "MISSING: not a folder"),
-        (["EMPTY", "A"], "EMPTY: no *.intrinsym.json results"),
+        (["EMPTY", "A"], "EMPTY: no results of intrinsym"),
         (["A", "B", "--metric", "seconds"], "--metric seconds: not in the results"),
         (["A", "C"], "no shape in both runs"),
         (["A", "B", "--shapes", "holes"], "no shape in both runs among --shapes"),
