@@ -126,6 +126,24 @@ def test_which_map_counts(star, monkeypatch) -> None:
     assert stats.source == "none" and (none == -1).all() and stats.mapped["extraction"] > 0.5
 
 
+def test_the_kept_map_pairs_vertices(star) -> None:
+    """The star's reflection through arm 1 with arm 2 sent onto itself by the reflection
+    through arm 3: the residual leaves arm 2 without images, and arm 5, whose images lie on
+    arm 2 (its partner arm, now without a partner), keeps every distance. A symmetry pairs
+    vertices: arm 5 gets no image either; arms 1, 3 and 4 keep the reflection."""
+    g, surface, _ = star
+    reflection = g.symmetries[4]  # arms 1 -> 1, 2 <-> 5, 3 <-> 4
+    assert np.array_equal(reflection[reflection], np.arange(len(g.vertices)))
+    mixed = np.where(g.labels == 2, g.symmetries[6], reflection)
+    residual_cut = self_hypothesis.residual_cut(mixed, self_hypothesis.map_residual(mixed, surface))
+    assert (residual_cut[g.labels == 2] == -1).all() and (residual_cut[g.labels == 5] >= 0).all()
+    kept, stats = self_hypothesis.self_symmetry_map(mixed, surface, Params(), 0)
+    assert stats.source == "extraction"
+    assert (kept[np.isin(g.labels, (2, 5))] == -1).all()
+    others = np.isin(g.labels, (1, 3, 4))
+    assert np.array_equal(kept[others], reflection[others])
+
+
 def test_a_hypothesis_leaves_out_the_trivial_matches(star) -> None:
     """Matched to itself with the trivial matches left out, the star's first hypothesis
     is a symmetry, not the identity."""

@@ -48,6 +48,7 @@ __all__ = [
     "round_trip",
     "sample_images",
     "score",
+    "trip_distance",
     "vertex_confidence",
 ]
 
@@ -151,6 +152,18 @@ def round_trip(vertices: np.ndarray, image: np.ndarray, scale: float) -> np.ndar
     ``INVOLUTIVE_SHARE`` of the vertices return under within ``DISAGREEMENT_RANGE`` is
     taken for a rotation of higher order, and says nothing.
 
+    Parameters and returns as :func:`trip_distance`'s, nan everywhere when the map is no
+    reflection.
+    """
+    d = trip_distance(vertices, image, scale)
+    if np.mean(d < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
+        return np.full(len(d), np.nan)
+    return d
+
+
+def trip_distance(vertices: np.ndarray, image: np.ndarray, scale: float) -> np.ndarray:
+    """Straight-line distance from each vertex to its image's image, any map.
+
     Parameters
     ----------
     vertices : (N, 3) float array
@@ -163,16 +176,11 @@ def round_trip(vertices: np.ndarray, image: np.ndarray, scale: float) -> np.ndar
     Returns
     -------
     (N,) float64
-        ``|vertices[image[image]] - vertices| / scale``; nan where either step has no
-        image, and everywhere when the map is no reflection.
+        ``|vertices[image[image]] - vertices| / scale``; nan where either step has no image.
     """
     a = np.asarray(image, dtype=np.int64)
-    v = np.asarray(vertices, dtype=np.float64)
     twice = np.where(a >= 0, a[np.maximum(a, 0)], -1)
-    d = disagreement(v, twice, np.arange(len(v)), scale)
-    if np.mean(d < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
-        return np.full(len(v), np.nan)
-    return d
+    return disagreement(vertices, twice, np.arange(len(a)), scale)
 
 
 def score(mass: np.ndarray, apart: np.ndarray, trip: np.ndarray | None = None) -> np.ndarray:

@@ -44,7 +44,7 @@ from ..params import MAP_MARGIN, Params
 from ..spectral import neighbours, spectral
 from ..surface import Surface
 from . import distortion
-from .confidence import DISAGREEMENT_RANGE, INVOLUTIVE_SHARE, disagreement, kept_mass, mass_within
+from .confidence import DISAGREEMENT_RANGE, INVOLUTIVE_SHARE, kept_mass, mass_within, trip_distance
 from .refine import consistent_anchors, spectral_descent, trilaterate
 from .vertex_maps import carried_to_components, fitted_vertex_map
 
@@ -387,7 +387,9 @@ def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) ->
 
 def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) -> np.ndarray:
     """The dominant symmetry's map with -1 where it has no support: a reflection that does
-    not return a vertex to within ``SUPPORT_TRIP`` of itself.
+    not return a vertex to within ``SUPPORT_TRIP`` of itself, or sends it to a vertex
+    without an image (a partial map: that vertex's partner is missing, so the two are not
+    each other's).
 
     On an incomplete shape, the vertices whose partner is missing still get an image
     (ZoomOut and the refinement map every vertex; a partial symmetry's part can reach past
@@ -407,12 +409,11 @@ def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) ->
         sqrt(area) of the shape, in input units.
     """
     image = np.asarray(vertex_map, dtype=np.int64)
-    twice = np.where(image >= 0, image[np.maximum(image, 0)], -1)
-    trip = disagreement(vertices, twice, np.arange(len(image)), scale)
+    trip = trip_distance(vertices, image, scale)
     mapped = image >= 0
     if not mapped.any() or np.mean(trip[mapped] < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
         return image
-    return np.where(trip >= SUPPORT_TRIP, -1, image)
+    return np.where((trip >= SUPPORT_TRIP) | (mapped & np.isnan(trip)), -1, image)
 
 
 def local_map_distortion(surface: Surface, vertex_map: np.ndarray) -> np.ndarray:

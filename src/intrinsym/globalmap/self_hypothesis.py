@@ -14,7 +14,10 @@ Such a map gives every vertex an image, the cut-away side's mirror too. Its resi
 (:func:`map_residual`), how much it typically changes a vertex's distances to the
 farthest-point anchors around it, is small where the symmetry holds and large where the vertex has no
 partner: the map sends it into the missing part's place, among vertices at other
-distances. The vertices whose residual exceeds :data:`SELF_RESIDUAL` get -1.
+distances. The vertices whose residual exceeds :data:`SELF_RESIDUAL` get -1. A symmetry
+pairs vertices: the map kept gets -1 too where it does not return a vertex to itself or
+sends it to a vertex without an image, as a global map does
+(:func:`~intrinsym.globalmap.globalmap.supported_map`).
 
 A shape can also have near-isometries that are no symmetry. The trivial match keeps every
 distance: a map under which most vertices stay within the trivial radius of themselves
@@ -40,6 +43,7 @@ from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
 from ..params import Params
 from ..surface import Surface, working_map
+from .globalmap import supported_map
 from .part_hypothesis import HYPOTHESIS_SAMPLES, hypothesis_maps
 from .part_map import PART_MAP_CHANGE, part_descriptors
 from .part_trilateration import TRILATERATION_ANCHORS, TRILATERATION_REACH, polished_trilateration
@@ -235,7 +239,9 @@ def self_symmetry_map(
         exceeds :data:`SELF_RESIDUAL`, the one that maps the most input vertices (the
         extraction's on a tie) among those whose median likeness rank is at most
         :data:`SELF_LIKENESS` and whose :func:`fixed_share` is at most
-        :data:`TRIVIAL_SHARE`; -1 everywhere when there is none.
+        :data:`TRIVIAL_SHARE`, then with -1 where it does not return a vertex to itself
+        (:func:`~intrinsym.globalmap.globalmap.supported_map`, as the global map); -1
+        everywhere when there is none.
     stats : SelfMapStats
     """
     descriptors = part_descriptors(given, given, p)
@@ -263,4 +269,4 @@ def self_symmetry_map(
     stats = SelfMapStats(source, mapped, likeness, fixed)
     if source == "none":
         return np.full(len(extraction_map), -1, dtype=np.int64), stats
-    return cut[best], stats
+    return supported_map(cut[best], given.input_vertices, given.scale), stats
