@@ -387,9 +387,7 @@ def smoothed_map(surface: Surface, vertex_map: np.ndarray, evecs: np.ndarray) ->
 
 def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) -> np.ndarray:
     """The dominant symmetry's map with -1 where it has no support: a reflection that does
-    not return a vertex to within ``SUPPORT_TRIP`` of itself, or sends it to a vertex
-    without an image (a partial map: that vertex's partner is missing, so the two are not
-    each other's).
+    not return a vertex to within ``SUPPORT_TRIP`` of itself.
 
     On an incomplete shape, the vertices whose partner is missing still get an image
     (ZoomOut and the refinement map every vertex; a partial symmetry's part can reach past
@@ -397,7 +395,8 @@ def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) ->
     partner, far from the vertex. A vertex whose round trip is that long has its image or
     its image's image off by half of it, ``DISAGREEMENT_RANGE``, at least: the map is not
     the symmetry there. A map that returns fewer than ``INVOLUTIVE_SHARE`` of the vertices
-    it maps is no reflection (a rotation of higher order) and keeps every image.
+    it maps is no reflection (a rotation of higher order) and keeps every image. A vertex
+    whose image has none (a partial map's) keeps its own: its round trip is unknown.
 
     Parameters
     ----------
@@ -413,7 +412,7 @@ def supported_map(vertex_map: np.ndarray, vertices: np.ndarray, scale: float) ->
     mapped = image >= 0
     if not mapped.any() or np.mean(trip[mapped] < DISAGREEMENT_RANGE) < INVOLUTIVE_SHARE:
         return image
-    return np.where((trip >= SUPPORT_TRIP) | (mapped & np.isnan(trip)), -1, image)
+    return np.where(trip >= SUPPORT_TRIP, -1, image)
 
 
 def local_map_distortion(surface: Surface, vertex_map: np.ndarray) -> np.ndarray:

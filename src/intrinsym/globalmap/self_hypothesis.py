@@ -14,10 +14,9 @@ Such a map gives every vertex an image, the cut-away side's mirror too. Its resi
 (:func:`map_residual`), how much it typically changes a vertex's distances to the
 farthest-point anchors around it, is small where the symmetry holds and large where the vertex has no
 partner: the map sends it into the missing part's place, among vertices at other
-distances. The vertices whose residual exceeds :data:`SELF_RESIDUAL` get -1. A symmetry
-pairs vertices: the map kept gets -1 too where it does not return a vertex to itself or
-sends it to a vertex without an image, as a global map does
-(:func:`~intrinsym.globalmap.globalmap.supported_map`).
+distances. The vertices whose residual exceeds :data:`SELF_RESIDUAL` get -1. A reflection
+is its own inverse: the map kept gets -1 too where it does not return a vertex to
+itself, as a global map does (:func:`~intrinsym.globalmap.globalmap.supported_map`).
 
 A shape can also have near-isometries that are no symmetry. The trivial match keeps every
 distance: a map under which most vertices stay within the trivial radius of themselves

@@ -109,7 +109,7 @@ def detect(
     anchors around a vertex by more than ``SELF_RESIDUAL`` ("no partner"), the one that
     maps the most vertices among those whose images look like their vertices (median
     likeness rank at most ``SELF_LIKENESS``) and that are not the trivial match, with -1
-    where it does not pair a vertex with its image as a global map does
+    where it does not return a vertex to itself as a global map does
     (:func:`~intrinsym.globalmap.globalmap.supported_map`), else -1 everywhere (``run.json``:
     ``self_map``; the stage ``self map``). A map kept ranks first among the symmetries
     (kind "self map", :func:`~intrinsym.extract.extract.mapped_symmetry`) and is the
