@@ -22,9 +22,9 @@ has a target within 0.05 of it beyond the trivial radius:
   0, so that BP's own answer is seen rather than the identity kept as "no partner").
 
 A term whose partner z stays near its best z sees the symmetry; one whose partner sits at
-the floor vetoes it. Where the unary's argmax finds the partner and BP's does not, the
-pairwise term has carried the rows to another consistent answer (on the SHREC'16 shapes,
-a slide of the identity just past the trivial radius). Command::
+the floor vetoes it. BP's columns above the unary's: the pairwise term spread the
+symmetry from the rows that see it; below: it carried the rows to another consistent
+answer. Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/unary_partner.py --data DATA
         [--shapes cat0 holes_cat_shape_1 cuts ...] [--terms wks spin wks*spin] [--param NAME=VALUE ...]
@@ -131,9 +131,11 @@ def measure(truth: Truth, term: str, params: intrinsym.Params) -> dict:
     seen = np.isfinite(partner_z)
     rows, to_partner, partner_z = rows[seen], to_partner[seen], partner_z[seen]
     error = to_partner[np.arange(len(rows)), z[rows].argmin(axis=1)]
-    bp_error = to_partner[
-        np.arange(len(rows)), _bp_marginals(problem, dataclasses.replace(params, unary=term))[rows].argmax(axis=1)
-    ]
+    # the potential floors the product (calibrated_potential): at TINY it holds every other floor
+    marginals = _bp_marginals(
+        problem, dataclasses.replace(params, unary=term), np.maximum(phi, params.unary_floor), near
+    )
+    bp_error = to_partner[np.arange(len(rows)), marginals[rows].argmax(axis=1)]
     return {
         "shape": truth.name,
         "term": term,
@@ -148,13 +150,13 @@ def measure(truth: Truth, term: str, params: intrinsym.Params) -> dict:
     }
 
 
-def _bp_marginals(problem: Problem, p: intrinsym.Params) -> np.ndarray:
-    """(S, T) marginals of one BP pass on ``p``'s unary with the trivial match removed."""
-    p = dataclasses.replace(p, trivial_weight=0.0, passes=1)
-    phi, floor, near, _ = pipeline.unary_model(problem, p)
+def _bp_marginals(problem: Problem, p: intrinsym.Params, phi: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """(S, T) marginals of one BP pass on the unary ``phi`` (floored at ``p.unary_floor``)
+    with the trivial match removed; ``near`` as :func:`intrinsym.pipeline.unary_model` gives it."""
+    p = dataclasses.replace(p, trivial_weight=0.0)
     pair = pipeline.pairwise_model(problem, p, 1)
     mrf = model.MRF(phi.astype(np.float32), problem.edges, problem.edge_length, pair.targets, pair.lam, p.rho)
-    return pipeline.solve_bp(mrf, phi, floor, near, p, True, 1, None).marginals
+    return pipeline.solve_bp(mrf, phi, p.unary_floor, near, p, True, 1, None).marginals
 
 
 def markdown(rows: Sequence[Mapping]) -> str:
