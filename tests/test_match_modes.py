@@ -18,7 +18,7 @@ from intrinsym.globalmap import confidence, distortion, part_map
 from intrinsym.globalmap.part_map import PartMapStats
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
-from intrinsym.pipeline import invert_part_match
+from intrinsym.pipeline import invert_part_match, part_params
 from intrinsym.result import modes
 from intrinsym.surface import prepare_pair
 
@@ -66,6 +66,25 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(ratio)
     a, b = prepare_pair(whole, from_arrays(whole.vertices * 1.005, whole.faces), 0, "auto")
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
+
+
+def test_a_part_and_its_whole_sample_part_targets_of_n_target(half_matched):
+    """A match of a part and its whole takes the part's unary and ``part_targets`` of
+    ``n_target`` labels, never fewer than ``calibration_k``; a Poisson-disc spacing fixes
+    the density instead, and the result's params say what ran."""
+    defaults = intrinsym.make_params()
+    assert part_params(defaults).n_target == round(defaults.n_target * defaults.part_targets) < defaults.n_target
+    assert part_params(defaults).unary == defaults.partial_unary
+    assert part_params(defaults).calibration == defaults.partial_calibration
+    assert part_params(intrinsym.make_params(n_target=8)).n_target == defaults.calibration_k
+    assert part_params(intrinsym.make_params(part_targets=1.0)).n_target == defaults.n_target
+    spaced = intrinsym.make_params(n_target=None, target_spacing=0.05)
+    assert part_params(spaced).n_target is None and part_params(spaced).target_spacing == 0.05
+    n_target = round(SMALL["n_target"] * defaults.part_targets)
+    assert half_matched.params.n_target == n_target == len(half_matched.target_points)
+    for bad in (0.0, 1.5):
+        with pytest.raises(intrinsym.ParameterError, match="part_targets must lie in"):
+            intrinsym.make_params(part_targets=bad)
 
 
 def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, half_matched, tmp_path):
@@ -120,9 +139,11 @@ def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and
     half, whole, _ = half_and_whole
     result = intrinsym.match(whole, half, intrinsym.make_params(**SMALL))
     assert result.info.part and result.info.target_part and "reverse match" in result.info.seconds
-    # the labels on the part lie as densely as on a whole: n_target times its share of the area
+    # the labels on the part lie as densely as the part's own match's on the whole:
+    # part_targets of n_target, times its share of the area
     share = surface_area(half) / surface_area(whole)
-    assert share < 0.8 and abs(len(result.target_points) - SMALL["n_target"] * share) <= 1
+    n_target = round(SMALL["n_target"] * result.params.part_targets)
+    assert share < 0.8 and abs(len(result.target_points) - n_target * share) <= 1
     spacing = result.info.resolved.target_spacing
     assert spacing == pytest.approx(half_matched.info.resolved.target_spacing, rel=0.01)
     found = result.symmetry_map()

@@ -28,7 +28,7 @@ from .stages import (
     solve_bp,
     unary_model,
 )
-from .two_shapes import COVER_SPACINGS, checked_symmetry, invert_part_match, match, part_target_params
+from .two_shapes import COVER_SPACINGS, checked_symmetry, invert_part_match, match, part_params, part_target_params
 
 __all__ = [
     "COVER_SPACINGS",
@@ -45,6 +45,7 @@ __all__ = [
     "match",
     "min_vertices",
     "pairwise_model",
+    "part_params",
     "part_target_params",
     "prepare",
     "sample_pair",

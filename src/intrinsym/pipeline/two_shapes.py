@@ -41,11 +41,12 @@ def match(
 
     When the smaller shape has less than ``PARTIAL_AREA`` of the larger's area it is taken
     for a part of it: both are measured in one unit, sqrt(area) of the larger, so that
-    the part keeps its size, and the unary is ``params.partial_unary`` calibrated as
-    ``params.partial_calibration`` says (the result's ``params.unary`` and
-    ``params.calibration`` say which ran; a part's Laplace-Beltrami spectrum, and so its
-    WKS, is not the whole's). Otherwise each is normalised to unit area, so near-isometric
-    frames of one object match whatever their units (``params.match_scale`` decides).
+    the part keeps its size, the unary is ``params.partial_unary`` calibrated as
+    ``params.partial_calibration`` says, and ``params.part_targets`` of ``n_target`` are
+    sampled (:func:`part_params`; the result's ``params`` say which ran; a part's
+    Laplace-Beltrami spectrum, and so its WKS, is not the whole's). Otherwise each is
+    normalised to unit area, so near-isometric frames of one object match whatever their
+    units (``params.match_scale`` decides).
     Parameters as in :func:`detect`; the trivial match does not apply.
 
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
@@ -102,7 +103,7 @@ def match(
     area_a, area_b = surface_area(surf_a.shape), surface_area(surf_b.shape)
     part = min(area_a, area_b) < PARTIAL_AREA
     if part:
-        p = dataclasses.replace(p, unary=p.partial_unary, calibration=p.partial_calibration)
+        p = part_params(p)
     clock.lap("prepare")
     target_part = part and area_b < area_a
     p_ab = part_target_params(p, area_b / area_a) if target_part else p
@@ -127,6 +128,18 @@ def match(
     clock.lap("reverse match")
     info = dataclasses.replace(result.info, target_part=True, part_map=stats)
     return _with_mode_marginals(dataclasses.replace(result, global_map=image, info=info), clock)
+
+
+def part_params(p: Params) -> Params:
+    """The parameters of a match of a part and its whole: the unary ``partial_unary``
+    calibrated as ``partial_calibration`` says, and ``part_targets`` of ``n_target``
+    (``target_spacing``, when given, fixes the density instead; never fewer than
+    ``calibration_k`` targets)."""
+    p = dataclasses.replace(p, unary=p.partial_unary, calibration=p.partial_calibration)
+    if p.target_spacing is not None or p.n_target is None:
+        return p
+    n_target = max(2, p.calibration_k, round(p.n_target * p.part_targets))
+    return dataclasses.replace(p, n_target=min(p.n_target, n_target))
 
 
 def part_target_params(p: Params, share: float) -> Params:
