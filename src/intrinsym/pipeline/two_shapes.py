@@ -72,8 +72,9 @@ def match(
     (:func:`~intrinsym.globalmap.vertex_maps.inverse_vertex_map`): -1 ("no match") on
     the vertices of A that B's image does not cover (B's extraction's map, not the partial
     functional map: see :func:`invert_part_match`). The marginals, the extraction and the
-    modes stay those of A to B, whose labels on B lie as densely as on a whole
-    (:func:`part_target_params`: ``n_target`` times B's share of A's area); the second
+    modes stay those of A to B, whose labels on B lie as densely as B's own match's on A
+    (:func:`part_target_params`: ``part_targets`` of ``n_target`` times B's share of A's
+    area); the second
     solve costs about as much as the first (``run.json``: ``target_part``, the stage
     ``reverse match``).
 
@@ -144,8 +145,9 @@ def part_params(p: Params) -> Params:
 
 def part_target_params(p: Params, share: float) -> Params:
     """The parameters of a match whose target is a part with ``share`` of the source's
-    area: ``n_target`` scaled by that share, so that the part's labels lie as densely as
-    on a whole (``target_spacing``, when given, already fixes the density).
+    area (``p`` those of :func:`part_params`): ``n_target`` scaled by that share, so that
+    the part's labels lie as densely as the part's own match's on the whole
+    (``target_spacing``, when given, already fixes the density).
 
     The pairwise term compares a source edge with the target pairs within the edge's
     length plus its truncation, and the source samples lie as far apart as on a whole:
@@ -232,8 +234,8 @@ def _match_header(a: Shape, b: Shape, preset: str, part: bool) -> dict:
 #: spacings of the part's images (:func:`invert_part_match`): a map that collapses the
 #: part onto a small region leaves the rest of the whole unmatched. Fewer leave more of
 #: the part's counterpart unmatched, more cover more of what was cut away: on the 125
-#: SHREC'16 shapes 1.5 leaves 0.888 of the cut-away vertices unmatched (every class
-#: >= 0.871) and matches 0.639 of the kept ones, 2 0.870 / 0.666, 3 0.852 / 0.690
+#: SHREC'16 shapes 1.5 leaves 0.911 of the cut-away vertices unmatched (every class
+#: >= 0.884) and matches 0.640 of the kept ones, 2 0.893 / 0.665, 3 0.873 / 0.690
 #: (docs/results.md's reach table).
 COVER_SPACINGS = 1.5
 
@@ -267,7 +269,7 @@ def invert_part_match(back: Result, part: ShapeLike, whole: ShapeLike, spacings:
     spacing = float(np.median(back.support.edge_length)) * back.info.resolved.scale  # input units
     # The extraction's map even where the part's match kept the partial functional map:
     # inverted, that one left 0.768 of the cut-away vertices unmatched on the 125 SHREC'16
-    # pairs, against 0.888 (and matched 0.618 of the kept ones, against 0.639)
+    # pairs, against 0.888 (and matched 0.618 of the kept ones, against 0.639, both at 4,000 labels)
     return inverse_vertex_map(
         back.extraction_map(),
         sw.vertices,
