@@ -287,7 +287,9 @@ def test_a_symmetric_pair_reports_both_answers(turned_pair, tmp_path):
     """Without the target's symmetry, the second answer comes from the model."""
     a, mirror, given = turned_pair
     result = dataclasses.replace(given, target_symmetry=None)
-    assert result.params.unary == intrinsym.make_params().unary  # one whole shape and another
+    # one whole shape and another: the defaults' unary and all of n_target
+    assert result.params.unary == intrinsym.make_params().unary
+    assert result.params.n_target == 500 == len(result.target_points)
     assert not result.info.part and result.calibration_table() is None
     # a complete pair: no inverse map, every vertex keeps an image
     assert not result.info.target_part and result.global_map is None and np.all(result.symmetry_map() >= 0)

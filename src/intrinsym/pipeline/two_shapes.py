@@ -136,11 +136,11 @@ def part_params(p: Params) -> Params:
     calibrated as ``partial_calibration`` says, and ``part_targets`` of ``n_target``
     (``target_spacing``, when given, fixes the density instead; never fewer than
     ``calibration_k`` targets)."""
-    p = dataclasses.replace(p, unary=p.partial_unary, calibration=p.partial_calibration)
-    if p.target_spacing is not None or p.n_target is None:
-        return p
-    n_target = max(2, p.calibration_k, round(p.n_target * p.part_targets))
-    return dataclasses.replace(p, n_target=min(p.n_target, n_target))
+    n_target = p.n_target
+    if p.target_spacing is None and n_target is not None:
+        # Params already holds calibration_k and 2 at most n_target
+        n_target = max(2, p.calibration_k, round(n_target * p.part_targets))
+    return dataclasses.replace(p, unary=p.partial_unary, calibration=p.partial_calibration, n_target=n_target)
 
 
 def part_target_params(p: Params, share: float) -> Params:
