@@ -128,6 +128,21 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
     assert off.info.part_map.source == "extraction" and list(off.info.part_map.distortion) == ["extraction"]
 
 
+def test_both_proposals_add_the_marginals_hypothesis(half_and_whole, half_matched):
+    """With ``part_proposals="both"`` the part's chain is the default's up to the
+    hypotheses, and the hypothesis weighed is the less distorted of the descriptors' and
+    the marginals' (never more distorted than the descriptors' alone)."""
+    half, whole, _ = half_and_whole
+    both = intrinsym.match(half, whole, intrinsym.make_params(**SMALL, part_proposals="both"))
+    assert np.array_equal(both.marginals, half_matched.marginals)
+    alone, with_marginals = half_matched.info.part_map.distortion, both.info.part_map.distortion
+    assert {k: v for k, v in with_marginals.items() if k != "hypothesis"} == {
+        k: v for k, v in alone.items() if k != "hypothesis"
+    }
+    assert with_marginals["hypothesis"] is not None
+    assert alone["hypothesis"] is None or with_marginals["hypothesis"] <= alone["hypothesis"]
+
+
 def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and_whole, half_matched, tmp_path):
     """match(whole, part)'s vertex map is the part's own match to the whole inverted
     (:func:`invert_part_match`), -1 off what it covers, and a loaded result keeps it; its

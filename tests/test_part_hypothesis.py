@@ -1,7 +1,7 @@
 """A part's map from a consistent cluster of descriptor matches
 (globalmap/part_hypothesis.py): the payoffs by hand, a planted cluster among random
-matches found by the replicator dynamics, and the posed figure's part located from its
-spin images."""
+matches found by the replicator dynamics, a marginal's peaks by hand, and the posed
+figure's part located from its spin images and from marginals alone."""
 
 from __future__ import annotations
 
@@ -78,3 +78,48 @@ def test_a_hypothesis_locates_the_figures_part(figure_and_part) -> None:
     cloud = from_arrays(figure.vertices[used])
     with pytest.raises(ValueError, match="two meshes"):
         part_hypothesis.hypothesis_maps(*prepare_pair(cloud, from_arrays(figure.vertices), 0, "auto"), (None, None), 1)
+
+
+def test_a_marginals_peaks_by_hand(figure_and_part) -> None:
+    figure, used = figure_and_part
+    a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    on_whole = b.shape.vertices
+    near, far = 288, 1  # vertex 0's nearest other vertex, and one past a match's tolerance
+    gap = np.linalg.norm(on_whole[[near, far]] - on_whole[0], axis=1)
+    assert gap[0] < part_map.PART_MAP_CHANGE < gap[1]
+    source = np.array([10, 200])  # working vertices of the part
+    marginals = np.zeros((2, len(on_whole)))
+    marginals[0, [0, near, far]] = [1.0, 0.9, 0.8]
+    marginals[1, [far, 0]] = [1.0, 0.5]
+    labels = np.arange(len(on_whole))
+    anchors = np.array([200, 10, 11])  # 11 lies nearest sample 10
+    peaks = part_hypothesis.marginal_peaks(marginals, source, labels, a, b, anchors, 2)
+    assert peaks.tolist() == [[far, 0], [0, far], [0, far]]
+    # the labels 0 and ``near`` are one place: the row repeats it
+    few = part_hypothesis.marginal_peaks(marginals[:, [0, near]], source, np.array([0, near]), a, b, anchors[:1], 3)
+    assert few.tolist() == [[0, 0, 0]]
+
+
+def test_a_hypothesis_from_marginals_alone(figure_and_part) -> None:
+    """Marginals that put each sample's mass about its true image locate the figure's
+    part without its descriptors."""
+    figure, used = figure_and_part
+    a, b = prepare_pair(part_of(figure, used), from_arrays(figure.vertices, figure.faces), 0, "auto")
+    source = np.arange(0, len(used), 6)  # input vertices of the part
+    labels = np.arange(len(figure.vertices))  # of the whole
+    truth = b.shape.vertices[b.vertex_map[used[source]]]
+    gaps = np.linalg.norm(truth[:, None, :] - b.shape.vertices[b.vertex_map[labels]][None, :, :], axis=2)
+    marginals = np.exp(-0.5 * (gaps / 0.03) ** 2)
+    marginals /= marginals.sum(axis=1, keepdims=True)
+    given = (marginals, a.vertex_map[source], b.vertex_map[labels])
+    maps = part_hypothesis.hypothesis_maps(a, b, (None, None), 1, marginals=given, proposals="marginals")
+    assert len(maps) == 1 and (maps[0] >= 0).mean() >= 0.95
+    assert right_share(figure, used, maps[0]) >= 0.9
+    descriptors = part_map.part_descriptors(a, b, Params())
+    both = part_hypothesis.hypothesis_maps(a, b, descriptors, 1, marginals=given, proposals="both")
+    assert len(both) == 2 and np.array_equal(both[1], maps[0])
+    assert np.array_equal(both[0], part_hypothesis.hypothesis_maps(a, b, descriptors, 1)[0])
+    with pytest.raises(ValueError, match="needs the marginals"):
+        part_hypothesis.hypothesis_maps(a, b, (None, None), 1, proposals="both")
+    with pytest.raises(ValueError, match="proposals must be"):
+        part_hypothesis.hypothesis_maps(a, b, (None, None), 1, marginals=given, proposals="peaks")

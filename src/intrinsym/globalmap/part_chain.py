@@ -33,7 +33,12 @@ __all__ = ["part_vertex_map"]
 
 
 def part_vertex_map(
-    extraction_map: np.ndarray, part: Surface, whole: Surface, given: tuple[Surface, Surface], p: Params
+    extraction_map: np.ndarray,
+    part: Surface,
+    whole: Surface,
+    given: tuple[Surface, Surface],
+    p: Params,
+    marginals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray | None, PartMapStats]:
     """The vertex map ``match`` keeps for a part (meshes, ``p.part_fmap`` on).
 
@@ -48,7 +53,10 @@ def part_vertex_map(
         which the spectra, the descriptors, the refinements, the trilaterations and the
         hypotheses are solved.
     p : Params
-        The spin images' parameters and ``part_hypotheses``.
+        The spin images' parameters, ``part_hypotheses`` and ``part_proposals``.
+    marginals : ((S, T) float, (S,) int, (T,) int) or None
+        BP's marginals, their samples' input vertices of the part and their labels' of
+        the whole; needed unless ``p.part_proposals`` is "descriptors".
 
     Returns
     -------
@@ -67,10 +75,12 @@ def part_vertex_map(
     if located is not None:
         image = refine_part_map(located, *given)
         stats = with_polish(image, part, whole, stats)
-    finished = (
-        polished_trilateration(seed, given, (part, whole))
-        for seed in hypothesis_maps(*given, descriptors, p.part_hypotheses)
-    )
+    on_given = None
+    if marginals is not None:
+        values, source, target = marginals
+        on_given = (values, given[0].vertex_map[source], given[1].vertex_map[target])
+    seeds = hypothesis_maps(*given, descriptors, p.part_hypotheses, marginals=on_given, proposals=p.part_proposals)
+    finished = (polished_trilateration(seed, given, (part, whole)) for seed in seeds)
     polished = [m for m in finished if m is not None]
     hypothesis, stats = hypothesis_if_less_distorted(polished, part, whole, stats)
     return (image if hypothesis is None else hypothesis), stats

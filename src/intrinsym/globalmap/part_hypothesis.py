@@ -8,7 +8,8 @@ farthest-point anchor of the part is offered the :data:`HYPOTHESIS_CANDIDATES` s
 the whole nearest it in descriptor space (the spin images of
 :func:`intrinsym.globalmap.part_map.part_descriptors`: local, so a cut changes them only
 near it, and blind to reflections, so the true and the mirror answer are both among
-them), and the largest set of these matches whose geodesic distances agree on the two
+them), or the peaks of BP's marginal at the part's sample nearest the anchor
+(``part_proposals``), and the largest set of these matches whose geodesic distances agree on the two
 shapes is selected by the replicator dynamics of their payoff matrix: the
 game-theoretic matching of Albarelli, Rodolà and Torsello (IJCV 2012) and Rodolà et al.
 ("A game-theoretic approach to deformable shape matching", CVPR 2012), where a stable
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
 from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
@@ -41,6 +43,7 @@ __all__ = [
     "HYPOTHESIS_SAMPLES",
     "consistent_matches",
     "hypothesis_maps",
+    "marginal_peaks",
     "match_payoffs",
     "replicator_dynamics",
 ]
@@ -182,8 +185,59 @@ def _cluster(population: np.ndarray) -> np.ndarray:
     return (population >= SUPPORT_SHARE * top) & (top > 0.0)
 
 
+def marginal_peaks(
+    marginals: np.ndarray,
+    source: np.ndarray,
+    target: np.ndarray,
+    part: Surface,
+    whole: Surface,
+    anchors: np.ndarray,
+    k: int,
+) -> np.ndarray:
+    """Each anchor's ``k`` strongest peaks of BP's marginal at the part's sample nearest it.
+
+    A peak is the most probable label not within ``PART_MAP_CHANGE`` (Euclidean) of a
+    stronger peak: a match's tolerance, so that the ``k`` are ``k`` places, not one mode's
+    neighbouring labels.
+
+    Parameters
+    ----------
+    marginals : (S, T) float
+        BP's marginals of the part's samples over the whole's labels.
+    source, target : (S,) and (T,) int
+        The samples' working vertices of ``part`` and the labels' of ``whole``.
+    part, whole : Surface
+    anchors : (A,) int
+        Working vertices of ``part``.
+    k : int
+
+    Returns
+    -------
+    (A, k) int64
+        Working vertices of ``whole``; a row with fewer than ``k`` peaks repeats its last.
+    """
+    nearest = cKDTree(part.shape.vertices[source]).query(part.shape.vertices[anchors])[1]
+    positions = whole.shape.vertices[target]
+    peaks = {}
+    for s in np.unique(nearest):
+        chosen: list[int] = []
+        for t in np.argsort(-marginals[s], kind="stable"):
+            if all(np.linalg.norm(positions[t] - positions[c]) > PART_MAP_CHANGE for c in chosen):
+                chosen.append(int(t))
+                if len(chosen) == k:
+                    break
+        peaks[s] = chosen + chosen[-1:] * (k - len(chosen))
+    return np.asarray(target)[np.array([peaks[s] for s in nearest])].astype(np.int64)
+
+
 def hypothesis_maps(
-    part: Surface, whole: Surface, descriptors: tuple[np.ndarray, np.ndarray], count: int, trivial: float = 0.0
+    part: Surface,
+    whole: Surface,
+    descriptors: tuple[np.ndarray, np.ndarray],
+    count: int,
+    trivial: float = 0.0,
+    marginals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    proposals: str = "descriptors",
 ) -> list[np.ndarray]:
     """Maps of a part into its whole located from consistent clusters of descriptor matches.
 
@@ -208,6 +262,14 @@ def hypothesis_maps(
         reach 0.894 / 0.904 / 0.907 against one's 0.896, worse by more than 0.01 on 10 / 7
         / 13 pairs: the distortion test that weighs them chooses a wrong one about as often
         as a right one; docs/limitations.md).
+    marginals : ((S, T) float, (S,) int, (T,) int) or None
+        BP's marginals with their samples' working vertices of ``part`` and labels' of
+        ``whole`` (:func:`marginal_peaks`); needed unless ``proposals`` is "descriptors".
+    proposals : {"descriptors", "marginals", "both"}
+        Each anchor's candidate images (``Params.part_proposals``): the
+        :data:`HYPOTHESIS_CANDIDATES` samples of the whole nearest it in descriptor space,
+        as many peaks of the marginal at the part's sample nearest it, or both, each
+        its own ``count`` rounds (the descriptors' maps first).
     trivial : float
         A shape matched to itself (``part`` and ``whole`` one surface): candidates within
         this distance of their anchor are left out, else the identity is the largest
@@ -219,26 +281,43 @@ def hypothesis_maps(
     list of (N_part_input,) int64
         Input vertex of the whole of every input vertex of the part, -1 where fewer than
         :data:`~intrinsym.globalmap.part_trilateration.MIN_ANCHORS` of the cluster's
-        anchors lie within reach; a cluster of fewer anchors gives no map, and the
+        anchors lie within reach; a cluster of fewer anchors gives no map, and that set's
         rounds stop there.
     """
     if part.shape.faces is None or whole.shape.faces is None:
         raise ValueError("a part's hypotheses need two meshes, not point clouds")
     if not 0.0 <= trivial < TRILATERATION_REACH:
         raise ValueError(f"trivial must lie in [0, {TRILATERATION_REACH}), got {trivial}")
+    if proposals not in ("descriptors", "marginals", "both"):
+        raise ValueError(f"proposals must be descriptors, marginals or both, got {proposals!r}")
+    if proposals != "descriptors" and marginals is None:
+        raise ValueError(f"proposals={proposals!r} needs the marginals")
     d_part, d_whole = descriptors
     vertices_p, vertices_w = part.shape.vertices, whole.shape.vertices
     anchors = farthest_point_sampling(vertices_p, min(TRILATERATION_ANCHORS, len(vertices_p)))
     samples = farthest_point_sampling(vertices_w, min(HYPOTHESIS_SAMPLES, len(vertices_w)))
     k = min(HYPOTHESIS_CANDIDATES, len(samples))
-    gaps = np.linalg.norm(d_part[anchors][:, None, :] - d_whole[samples][None, :, :], axis=2)
-    part_graph, whole_graph = part.chord_graph, whole.chord_graph
-    on_part = distances_from(part_graph, anchors, limit=TRILATERATION_REACH)
-    if trivial > 0.0:
-        gaps[on_part[:, samples] < trivial] = np.inf
-    nearest = np.argsort(gaps, axis=1, kind="stable")[:, :k]
-    anchor_of = np.repeat(np.arange(len(anchors)), k)
-    target_of = samples[nearest.ravel()]
+    on_part = distances_from(part.chord_graph, anchors, limit=TRILATERATION_REACH)
+    offered = []
+    if proposals != "marginals":
+        gaps = np.linalg.norm(d_part[anchors][:, None, :] - d_whole[samples][None, :, :], axis=2)
+        if trivial > 0.0:
+            gaps[on_part[:, samples] < trivial] = np.inf
+        offered.append(samples[np.argsort(gaps, axis=1, kind="stable")[:, :k]])
+    if marginals is not None and proposals != "descriptors":
+        offered.append(marginal_peaks(*marginals, part, whole, anchors, k))
+    return [m for per_anchor in offered for m in _cluster_maps(part, whole, anchors, on_part, per_anchor, count)]
+
+
+def _cluster_maps(
+    part: Surface, whole: Surface, anchors: np.ndarray, on_part: np.ndarray, per_anchor: np.ndarray, count: int
+) -> list[np.ndarray]:
+    """:func:`hypothesis_maps`' rounds on one set of candidates: ``per_anchor``, (A, k)
+    working vertices of ``whole`` offered to each anchor; ``on_part``, (A, N_part_working)
+    the anchors' distances within reach."""
+    anchor_of = np.repeat(np.arange(len(anchors)), per_anchor.shape[1])
+    target_of = per_anchor.ravel()
+    whole_graph = whole.chord_graph
     targets, row = np.unique(target_of, return_inverse=True)
     # a pair pays nothing beyond this distance on the whole
     horizon = TRILATERATION_REACH + PAYOFF_CUTOFF * PART_MAP_CHANGE
@@ -264,7 +343,7 @@ def hypothesis_maps(
         # the trilateration's horizon: a vertex's image lies within reach of each
         # anchor's image it is located from, up to the change allowed
         images = distances_from(whole_graph, target_of[chosen], limit=2.0 * TRILATERATION_REACH)
-        start = np.full(len(vertices_p), -1, dtype=np.int64)
+        start = np.full(len(part.shape.vertices), -1, dtype=np.int64)
         located = best_images(on_part[anchor_of[chosen]], images, TRILATERATION_REACH, start)
         maps.append(input_map(located, part, whole))
     return maps

@@ -189,7 +189,8 @@ def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[
         _, stats = choose_part_map(result.symmetry_map(), part, whole)
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
     given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
-    image, stats = part_vertex_map(result.symmetry_map(), part, whole, given, p)
+    marginals = (result.marginals, result.source_point_vertex, result.target_point_vertex)
+    image, stats = part_vertex_map(result.symmetry_map(), part, whole, given, p, marginals)
     info = dataclasses.replace(result.info, part_map=stats)
     return dataclasses.replace(result, global_map=result.global_map if image is None else image, info=info)
 
