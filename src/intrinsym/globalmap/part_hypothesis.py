@@ -28,12 +28,15 @@ it over the part.
 
 from __future__ import annotations
 
+from typing import get_args
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
 from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
+from ..params import Proposals
 from ..surface import Surface, input_map
 from .part_map import PART_MAP_CHANGE
 from .part_trilateration import MIN_ANCHORS, TRILATERATION_ANCHORS, TRILATERATION_REACH, best_images
@@ -217,15 +220,18 @@ def marginal_peaks(
         Working vertices of ``whole``; a row with fewer than ``k`` peaks repeats its last.
     """
     nearest = cKDTree(part.shape.vertices[source]).query(part.shape.vertices[anchors])[1]
-    positions = whole.shape.vertices[target]
+    labels = cKDTree(whole.shape.vertices[target])
     peaks = {}
     for s in np.unique(nearest):
         chosen: list[int] = []
+        suppressed = np.zeros(len(target), dtype=bool)
         for t in np.argsort(-marginals[s], kind="stable"):
-            if all(np.linalg.norm(positions[t] - positions[c]) > PART_MAP_CHANGE for c in chosen):
-                chosen.append(int(t))
-                if len(chosen) == k:
-                    break
+            if suppressed[t]:
+                continue
+            chosen.append(int(t))
+            if len(chosen) == k:
+                break
+            suppressed[labels.query_ball_point(labels.data[t], PART_MAP_CHANGE)] = True
         peaks[s] = chosen + chosen[-1:] * (k - len(chosen))
     return np.asarray(target)[np.array([peaks[s] for s in nearest])].astype(np.int64)
 
@@ -237,7 +243,7 @@ def hypothesis_maps(
     count: int,
     trivial: float = 0.0,
     marginals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-    proposals: str = "descriptors",
+    proposals: Proposals = "descriptors",
 ) -> list[np.ndarray]:
     """Maps of a part into its whole located from consistent clusters of descriptor matches.
 
@@ -288,18 +294,18 @@ def hypothesis_maps(
         raise ValueError("a part's hypotheses need two meshes, not point clouds")
     if not 0.0 <= trivial < TRILATERATION_REACH:
         raise ValueError(f"trivial must lie in [0, {TRILATERATION_REACH}), got {trivial}")
-    if proposals not in ("descriptors", "marginals", "both"):
-        raise ValueError(f"proposals must be descriptors, marginals or both, got {proposals!r}")
+    if proposals not in get_args(Proposals):
+        raise ValueError(f"proposals must be one of {get_args(Proposals)}, got {proposals!r}")
     if proposals != "descriptors" and marginals is None:
         raise ValueError(f"proposals={proposals!r} needs the marginals")
     d_part, d_whole = descriptors
     vertices_p, vertices_w = part.shape.vertices, whole.shape.vertices
     anchors = farthest_point_sampling(vertices_p, min(TRILATERATION_ANCHORS, len(vertices_p)))
-    samples = farthest_point_sampling(vertices_w, min(HYPOTHESIS_SAMPLES, len(vertices_w)))
-    k = min(HYPOTHESIS_CANDIDATES, len(samples))
+    k = min(HYPOTHESIS_CANDIDATES, HYPOTHESIS_SAMPLES, len(vertices_w))
     on_part = distances_from(part.chord_graph, anchors, limit=TRILATERATION_REACH)
     offered = []
     if proposals != "marginals":
+        samples = farthest_point_sampling(vertices_w, min(HYPOTHESIS_SAMPLES, len(vertices_w)))
         gaps = np.linalg.norm(d_part[anchors][:, None, :] - d_whole[samples][None, :, :], axis=2)
         if trivial > 0.0:
             gaps[on_part[:, samples] < trivial] = np.inf
