@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from conftest import unit_square_grid
-from intrinsym.globalmap.distortion import local_distortion, map_distortion
+from intrinsym.geodesics import geodesics
+from intrinsym.globalmap.distortion import local_distortion, local_distortion_on_graph, map_distortion
 from intrinsym.mesh.shape import from_arrays
 
 
@@ -81,3 +82,21 @@ def test_local_distortion_is_nan_where_nothing_is_mapped():
     assert np.all(np.isnan(got[v[:, 0] > 0.6]))
     with pytest.raises(ValueError, match="expected"):
         local_distortion(np.arange(len(v) - 1), shape)
+
+
+def test_local_distortion_into_another_graph():
+    """A map into a second graph is measured on that graph: the identity of the square
+    onto the square grown by 1.5 changes every distance d by d / 2."""
+    n = 24
+    v, f = unit_square_grid(n)
+    _, _, graph = geodesics.unit_area_graph(from_arrays(v, f))
+    fine = {"radius": 0.15, "spacing": 0.5 / n, "clip": 0.15}
+    identity = np.arange(len(v))
+    same = local_distortion_on_graph(graph, v, identity, **fine)
+    assert np.array_equal(local_distortion_on_graph(graph, v, identity, **fine, target_graph=graph), same)
+    assert same.max() < 1e-12
+    grown = local_distortion_on_graph(graph, v, identity, **fine, target_graph=1.5 * graph)
+    d = np.linalg.norm(v[:, None, :2] - v[None, :, :2], axis=2)
+    near = (d <= fine["radius"]) & (d > 0)
+    expected = 0.5 * (d * near).sum(axis=1) / near.sum(axis=1)
+    assert np.abs(grown - expected).max() < 0.01

@@ -111,15 +111,19 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
     # fewer, a trilaterated one polished, then replaced by the hypothesis's map where that
     # changes fewer still, and run.json says which
     assert stats is not None and "part map" in result.info.seconds
-    chain = dataclasses.replace(stats, hypothesis=False)
+    chain = dataclasses.replace(stats, hypothesis=False, blended=False)
     weighed = stats.distortion["trilaterated" if chain.polished else chain.final]
     assert weighed is not None
-    assert all(d is None or weighed <= d for k, d in stats.distortion.items() if k not in ("polished", "hypothesis"))
+    later = ("polished", "hypothesis", "blended")
+    assert all(d is None or weighed <= d for k, d in stats.distortion.items() if k not in later)
     assert stats.polished == stats.trilaterated and stats.kept == 1.0 - stats.distortion[stats.final]
     assert "hypothesis" in stats.distortion
     hypothesis, before = stats.distortion["hypothesis"], stats.distortion[chain.final]
     assert stats.hypothesis == (hypothesis is not None and (before is None or hypothesis < before))
-    changed = stats.source == "partial_fmap" or stats.refined or stats.trilaterated or stats.hypothesis
+    # the blend of the map kept before the hypothesis and the hypothesis's, weighed last
+    blended, before = stats.distortion.get("blended"), stats.distortion[dataclasses.replace(stats, blended=False).final]
+    assert stats.blended == (blended is not None and (before is None or blended < before))
+    changed = stats.source == "partial_fmap" or stats.refined or stats.trilaterated or stats.hypothesis or stats.blended
     assert (result.global_map is not None) == changed
     assert back.info.part_map == stats and np.array_equal(back.symmetry_map(), result.symmetry_map())
     half, whole, _ = half_and_whole
@@ -136,8 +140,9 @@ def test_both_proposals_add_the_marginals_hypothesis(half_and_whole, half_matche
     both = intrinsym.match(half, whole, intrinsym.make_params(**SMALL, part_proposals="both"))
     assert np.array_equal(both.marginals, half_matched.marginals)
     alone, with_marginals = half_matched.info.part_map.distortion, both.info.part_map.distortion
-    assert {k: v for k, v in with_marginals.items() if k != "hypothesis"} == {
-        k: v for k, v in alone.items() if k != "hypothesis"
+    later = ("hypothesis", "blended")
+    assert {k: v for k, v in with_marginals.items() if k not in later} == {
+        k: v for k, v in alone.items() if k not in later
     }
     assert with_marginals["hypothesis"] is not None
     assert alone["hypothesis"] is None or with_marginals["hypothesis"] <= alone["hypothesis"]

@@ -408,8 +408,9 @@ class Params:
         "descriptors",
         "the images a part's hypotheses offer each anchor: the whole's samples nearest it in "
         "spin-image space (descriptors), the peaks of BP's marginal at the part's sample nearest "
-        "it (marginals), or both (part_hypotheses from each); on the 125 SHREC'16 pairs within "
-        "0.10 0.897 / 0.889 / 0.905, both taking 1.17x the time of the slowest pairs alone",
+        "it (marginals), or both (part_hypotheses from each); on the 125 SHREC'16 pairs before "
+        "the blend within 0.10 0.897 / 0.889 / 0.905, both taking 1.17x the time of the slowest "
+        "pairs alone",
         "global map",
         match_only=True,
     )

@@ -6,8 +6,8 @@ the spectral ones) by the marginal mass they keep; :mod:`.refine` refines a map 
 geodesic trilateration and spectral descent; :mod:`.part_map` chooses a part's map
 into its whole (the extraction's, a partial functional map's from :mod:`.partial_fmap`,
 refined, or trilaterated by :mod:`.part_trilateration`, or located from a consistent
-cluster of descriptor matches by :mod:`.part_hypothesis`), in the order :mod:`.part_chain`
-runs them; :mod:`.vertex_maps` extends a sampled
+cluster of descriptor matches by :mod:`.part_hypothesis`, or blended from these by
+:mod:`.part_blend`), in the order :mod:`.part_chain` runs them; :mod:`.vertex_maps` extends a sampled
 symmetry to every input vertex; :mod:`.confidence` measures how far the marginals
 support a map (and calibrates it); :mod:`.distortion` how far a map is from an isometry,
 without ground truth.

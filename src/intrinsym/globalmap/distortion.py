@@ -196,8 +196,10 @@ def local_distortion_on_graph(
     radius: float = LOCAL_RADIUS,
     spacing: float = LOCAL_SPACING,
     clip: float = LOCAL_RADIUS,
+    target_graph: sp.spmatrix | None = None,
 ) -> np.ndarray:
-    """:func:`local_distortion` of a map between the vertices of one geodesic graph.
+    """:func:`local_distortion` of a map between the vertices of one geodesic graph, or
+    from one graph's vertices to another's.
 
     Parameters
     ----------
@@ -209,6 +211,8 @@ def local_distortion_on_graph(
         Image vertex of every vertex, -1 for none.
     radius, spacing, clip : float
         As in :func:`local_distortion`.
+    target_graph : (M, M) sparse, optional
+        The codomain's geodesic graph, in the same unit (default ``graph``: a self-map).
 
     Returns
     -------
@@ -228,7 +232,8 @@ def local_distortion_on_graph(
     # d(T x, T y) up to radius + clip: a pair beyond changes by at least clip
     beyond = radius + clip
     pairs = np.column_stack([image[seeds[rows]], image[ys]])
-    d_image = np.minimum(geodesics.pair_distances(graph, pairs, beyond), beyond)
+    codomain = graph if target_graph is None else target_graph
+    d_image = np.minimum(geodesics.pair_distances(codomain, pairs, beyond), beyond)
     change = np.minimum(np.abs(d_image - d), clip)
     count = np.bincount(rows, minlength=len(seeds))
     total = np.bincount(rows, weights=change, minlength=len(seeds))

@@ -5,8 +5,10 @@ part to its whole"): the extraction's map or the partial functional map, whichev
 changes fewer of the part's distances (:func:`~intrinsym.globalmap.part_map.choose_part_map`);
 its ZoomOut refinement; the least distorted round of its trilateration, polished; then
 the hypotheses located from consistent clusters of descriptor matches
-(:mod:`intrinsym.globalmap.part_hypothesis`), each trilaterated and polished. Each later
-map replaces the one kept so far only where it changes fewer of the part's distances.
+(:mod:`intrinsym.globalmap.part_hypothesis`), each trilaterated and polished; then the
+blend of the map kept before the hypotheses and the hypotheses' maps, vertex by vertex
+(:mod:`intrinsym.globalmap.part_blend`), trilaterated and polished. Each later map
+replaces the one kept so far only where it changes fewer of the part's distances.
 """
 
 from __future__ import annotations
@@ -15,9 +17,11 @@ import numpy as np
 
 from ..params import Params
 from ..surface import Surface
+from .part_blend import blended_map
 from .part_hypothesis import hypothesis_maps
 from .part_map import (
     PartMapStats,
+    blended_if_less_distorted,
     choose_part_map,
     hypothesis_if_less_distorted,
     part_descriptors,
@@ -82,5 +86,12 @@ def part_vertex_map(
     seeds = hypothesis_maps(*given, descriptors, p.part_hypotheses, marginals=on_given, proposals=p.part_proposals)
     finished = (polished_trilateration(seed, given, (part, whole)) for seed in seeds)
     polished = [m for m in finished if m is not None]
+    before = extraction_map if image is None else image
     hypothesis, stats = hypothesis_if_less_distorted(polished, part, whole, stats)
-    return (image if hypothesis is None else hypothesis), stats
+    if hypothesis is not None:
+        image = hypothesis
+    if not polished:
+        return image, stats
+    blend = polished_trilateration(blended_map([before, *polished], *given), given, (part, whole))
+    blended, stats = blended_if_less_distorted(blend, part, whole, stats)
+    return (image if blended is None else blended), stats

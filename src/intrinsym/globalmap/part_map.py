@@ -34,6 +34,7 @@ __all__ = [
     "PART_MAP_CHANGE",
     "PART_MAP_RADIUS",
     "PartMapStats",
+    "blended_if_less_distorted",
     "choose_part_map",
     "hypothesis_if_less_distorted",
     "least_distorted",
@@ -101,6 +102,11 @@ class PartMapStats:
         (:func:`intrinsym.globalmap.part_hypothesis.hypothesis_maps`,
         :func:`hypothesis_if_less_distorted`; ``distortion["hypothesis"]``: the least
         distorted hypothesis's share).
+    blended : bool
+        The map kept so far was then replaced by the blend of the candidates (the map
+        kept before the hypotheses and the hypotheses' maps) vertex by vertex, trilaterated
+        and polished (:func:`intrinsym.globalmap.part_blend.blended_map`,
+        :func:`blended_if_less_distorted`; ``distortion["blended"]``: its share).
     """
 
     source: str
@@ -109,10 +115,13 @@ class PartMapStats:
     trilaterated: bool = False
     polished: bool = False
     hypothesis: bool = False
+    blended: bool = False
 
     @property
     def final(self) -> str:
         """The key of ``distortion`` that measures the map kept in the end."""
+        if self.blended:
+            return "blended"
         if self.hypothesis:
             return "hypothesis"
         if self.polished:
@@ -355,6 +364,22 @@ def hypothesis_if_less_distorted(
     returned as by :func:`trilaterated_if_less_distorted`, under ``"hypothesis"``.
     """
     return _if_less_distorted("hypothesis", maps, part, whole, stats)
+
+
+def blended_if_less_distorted(
+    blend: np.ndarray | None, part: Surface, whole: Surface, stats: PartMapStats
+) -> tuple[np.ndarray | None, PartMapStats]:
+    """The blend of a part's candidate maps, if it changes fewer of the part's geodesic
+    distances than the map kept so far.
+
+    The test of :func:`choose_part_map`, for the candidates' blend
+    (:func:`intrinsym.globalmap.part_blend.blended_map`), trilaterated and polished as a
+    hypothesis is: a blend of right pieces keeps the part's distances better than each
+    piece's map, one that joins a wrong piece tears them at its seams. ``blend`` None
+    (too few vertices mapped to trilaterate) leaves ``stats`` as it is; returned as by
+    :func:`trilaterated_if_less_distorted`, under ``"blended"``.
+    """
+    return _if_less_distorted("blended", [] if blend is None else [blend], part, whole, stats)
 
 
 def _if_less_distorted(

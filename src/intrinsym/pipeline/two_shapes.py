@@ -59,10 +59,12 @@ def match(
     ZoomOut once more (:func:`~intrinsym.globalmap.part_map.with_polish`), and replaced
     by the map located from a consistent cluster of spin-image matches
     (:func:`~intrinsym.globalmap.part_hypothesis.hypothesis_maps`), trilaterated and
-    polished, where that keeps more of them than the map kept so far (``run.json``:
-    ``part_map``; the stage ``part map``, 9-22 s on the SHREC'16 shapes on a 2-core
-    machine). The share of A's short distances the
-    kept map keeps is the score of its confidence
+    polished, where that keeps more of them than the map kept so far, and last by the
+    blend of those maps vertex by vertex, each vertex where the candidate least distorted
+    around it sends it (:func:`~intrinsym.globalmap.part_blend.blended_map`), trilaterated
+    and polished, where that keeps more of them still (``run.json``: ``part_map``; the
+    stage ``part map``, 9-22 s on the SHREC'16 shapes on a 2-core machine). The share
+    of A's short distances the kept map keeps is the score of its confidence
     (:meth:`~intrinsym.result.result.Result.symmetry_confidence`).
 
     When the target B is the part (A the whole), every source sample still takes a label,
