@@ -8,7 +8,7 @@ body slid along its length. The test that weighs them whole
 included. The blend takes every vertex's image from the candidate that changes the part's
 distances least around it: the local distortion of
 :func:`intrinsym.globalmap.distortion.local_distortion_on_graph`, the mean change of the
-distances within ``LOCAL_RADIUS`` of the vertex's measured neighbour, as Kim, Lipman and
+distances within ``LOCAL_RADIUS`` of the vertex's nearest measured sample, as Kim, Lipman and
 Funkhouser's blended intrinsic maps (SIGGRAPH 2011) weigh their conformal maps by their
 local distortion. ``match`` then trilaterates and polishes the blend as it does a
 hypothesis (:func:`intrinsym.globalmap.part_trilateration.polished_trilateration`): where
