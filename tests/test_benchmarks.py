@@ -169,6 +169,18 @@ def test_calibration_leaves_each_class_out():
     assert per_class[0]["global"] == [("a0", pytest.approx(0.0), pytest.approx(1.0))]
 
 
+def test_calibration_table_fit_by_hand():
+    import calibration
+
+    # a table of 0.5 / 1.0 on two bins; class a: 2 of 4 right in bin 0 (exact), class b:
+    # 1 of 2 right in bin 1 (off by 0.5). Pooled ECE: 2/6 * 0.5; b's global gap 0.5, a's 0.
+    rows = [_row("a", [4, 0], [2, 0], "a0"), _row("b", [0, 2], [0, 1], "b0"), _row("b", [0, 0], [0, 0], "b1")]
+    fit = calibration.table_fit(rows, np.array([0.5, 1.0]))
+    assert fit["ece"] == pytest.approx(2 / 6 * 0.5)
+    assert fit["per_class"] == {"a": pytest.approx(0.0), "b": pytest.approx(0.5)}
+    assert fit["global_gap"] == pytest.approx(0.25)  # b1 scores no vertex: left out
+
+
 def test_refine_table_by_hand(tmp_path, capsys):
     import refine
 
