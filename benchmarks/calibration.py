@@ -111,6 +111,19 @@ def ece(conf: np.ndarray, count: np.ndarray, within: np.ndarray) -> float:
     return err
 
 
+def global_confidences(rows: list[dict], table: np.ndarray) -> list[tuple[str, float, float]]:
+    """Per row: its shape, its global confidence under ``table`` (the mean over its
+    vertices) and its measured share within 0.05; a map that gives no scored vertex an
+    image (nothing to be sure of) left out."""
+    out = []
+    for r in rows:
+        c = np.asarray(r["reliability"]["count"], dtype=np.float64)
+        w = np.asarray(r["reliability"]["within_0.05"], dtype=np.float64)
+        if c.sum():
+            out.append((r["shape"], float((table * c).sum() / c.sum()), float(w.sum() / c.sum())))
+    return out
+
+
 def leave_one_class_out(rows: list[dict]) -> tuple[list[dict], np.ndarray, np.ndarray, np.ndarray]:
     """Per class: ECE of the raw mass and of the held-out calibration, and the global
     confidence against the measured share; plus the pooled held-out bins."""
@@ -122,20 +135,13 @@ def leave_one_class_out(rows: list[dict]) -> tuple[list[dict], np.ndarray, np.nd
         calib = fit(train)
         count, within = histogram(test)
         mass = bin_centres(test)
-        shapes = []
-        for r in test:
-            c = np.asarray(r["reliability"]["count"], dtype=np.float64)
-            w = np.asarray(r["reliability"]["within_0.05"], dtype=np.float64)
-            if not c.sum():  # a map that gives no scored vertex an image: nothing to be sure of
-                continue
-            shapes.append((r["shape"], float((calib * c).sum() / c.sum()), float(w.sum() / c.sum())))
         out.append(
             {
                 "class": cls,
                 "shapes": len(test),
                 "ece_mass": ece(mass, count, within),
                 "ece_calibrated": ece(calib, count, within),
-                "global": shapes,
+                "global": global_confidences(test, calib),
             }
         )
         pooled_conf.append(calib)
@@ -153,12 +159,8 @@ def table_fit(rows: list[dict], table: np.ndarray) -> dict:
     for cls in sorted({r["class"] for r in rows}):
         c, w = histogram([r for r in rows if r["class"] == cls])
         per_class[cls] = ece(table, c, w)
-    gaps = []
-    for r in rows:
-        c = np.asarray(r["reliability"]["count"], dtype=np.float64)
-        if c.sum():
-            gaps.append(abs((table * c).sum() - np.sum(r["reliability"]["within_0.05"])) / c.sum())
-    return {"ece": ece(table, count, within), "per_class": per_class, "global_gap": float(np.mean(gaps))}
+    gap = np.mean([abs(predicted - measured) for _, predicted, measured in global_confidences(rows, table)])
+    return {"ece": ece(table, count, within), "per_class": per_class, "global_gap": float(gap)}
 
 
 def markdown(rows: list[dict]) -> str:
