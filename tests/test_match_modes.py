@@ -132,6 +132,7 @@ def test_a_parts_map_takes_the_part_table_and_keeps_it_on_load(half_and_whole, h
     assert off.info.part_map.source == "extraction" and list(off.info.part_map.distortion) == ["extraction"]
 
 
+@pytest.mark.slow  # a second part chain for an option, not the default (CI: -m slow)
 def test_both_proposals_add_the_marginals_hypothesis(half_and_whole, half_matched):
     """With ``part_proposals="both"`` the part's chain is the default's up to the
     hypotheses, and the hypothesis weighed is the less distorted of the descriptors' and
