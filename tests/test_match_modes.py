@@ -20,6 +20,7 @@ from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.pipeline import invert_part_match, part_params
 from intrinsym.result import modes
+from intrinsym.spectral import laplacian
 from intrinsym.surface import prepare_pair
 
 
@@ -66,6 +67,31 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(ratio)
     a, b = prepare_pair(whole, from_arrays(whole.vertices * 1.005, whole.faces), 0, "auto")
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
+
+
+def test_the_matches_onto_one_prepared_whole_are_those_of_its_shape(half_and_whole, half_matched, monkeypatch):
+    """A whole prepared once (:func:`intrinsym.prepare`) and given to every match onto it:
+    the arrays of the match of the shape itself, and from the second match on only the
+    part's Laplace-Beltrami eigenpairs are solved (the whole keeps its own); a whole
+    prepared for another working size is refused."""
+    half, whole, _ = half_and_whole
+    p = intrinsym.make_params(**SMALL)
+    prepared = intrinsym.prepare(whole, p)
+    first = intrinsym.match(half, prepared, p)
+    for got, want in [
+        (first.global_map, half_matched.global_map),
+        (first.marginals, half_matched.marginals),
+        (first.mode_marginals, half_matched.mode_marginals),
+    ]:
+        np.testing.assert_array_equal(got, want)
+    solved: list[int] = []
+    solve = laplacian.eigenpairs
+    monkeypatch.setattr(laplacian, "eigenpairs", lambda v, *rest: solved.append(len(v)) or solve(v, *rest))
+    again = intrinsym.match(half, prepared, p)
+    np.testing.assert_array_equal(again.global_map, first.global_map)
+    assert solved and len(prepared.shape.vertices) not in solved
+    with pytest.raises(intrinsym.ParameterError, match="working size of 8000 vertices.*need 800"):
+        intrinsym.match(half, intrinsym.prepare(whole), p)
 
 
 def test_a_part_and_its_whole_sample_part_targets_of_n_target(half_matched):

@@ -55,6 +55,9 @@ class Surface:
         parameters it was prepared with, :func:`intrinsym.prepare`).
     subdivided : bool
         Whether the cleaned mesh was subdivided to reach it.
+    input_shape : Shape or None
+        The shape it was prepared from (:func:`as_shape` returns it): what ``match``
+        prepares again, without subdivision, for a part's map.
     """
 
     shape: Shape
@@ -66,6 +69,7 @@ class Surface:
     normals: np.ndarray
     min_vertices: int = 0
     subdivided: bool = False
+    input_shape: Shape | None = None
     _spectra: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = dataclasses.field(
         default_factory=dict, init=False, repr=False, compare=False
     )
@@ -177,6 +181,7 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
         normals=vertex_normals(work),
         min_vertices=min_vertices,
         subdivided=subdivided,
+        input_shape=shape,
     )
 
 
@@ -205,13 +210,42 @@ def serves(surface: Surface, min_vertices: int) -> bool:
 
 
 def rescaled(surface: Surface, factor: float) -> Surface:
-    """``surface`` with its working lengths multiplied by ``factor`` (its unit divided by it)."""
+    """``surface`` with its working lengths multiplied by ``factor`` (its unit divided by
+    it); ``surface`` itself, with the eigenpairs and balls it keeps, when ``factor`` is 1."""
+    if factor == 1.0:
+        return surface
     work = Shape(surface.shape.vertices * factor, surface.shape.faces, surface.shape.path)
     return dataclasses.replace(surface, shape=work, scale=surface.scale / factor, graph=surface.graph * factor)
 
 
+def common_unit(a: Surface, b: Surface, scale: MatchScale) -> float | None:
+    """The input length both of two prepared surfaces are measured in for matching, or
+    None when each keeps its own (unit area).
+
+    Parameters
+    ----------
+    a, b : Surface
+        As :func:`prepare` returns them (each in its own unit, sqrt of its area).
+    scale : {"auto", "larger", "each"}
+        "larger": sqrt(area) of the larger one, so that a part keeps its size relative to
+        the whole (each prepared alone would be blown up to unit area, and every geodesic
+        distance the pairwise term compares with the other shape's would be off by
+        sqrt(area ratio)); "each": None; "auto": "larger" when the smaller has less than
+        ``PARTIAL_AREA`` of the larger's area, else "each".
+    """
+    if scale == "auto":
+        ratio = (min(a.scale, b.scale) / max(a.scale, b.scale)) ** 2
+        scale = "larger" if ratio < PARTIAL_AREA else "each"
+    return None if scale == "each" else max(a.scale, b.scale)
+
+
+def in_unit(surface: Surface, unit: float | None) -> Surface:
+    """A surface from :func:`prepare` measured in ``unit`` (input length; None: as it is)."""
+    return surface if unit is None else rescaled(surface, surface.scale / unit)
+
+
 def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tuple[Surface, Surface]:
-    """:func:`prepare` two shapes for matching, in one common unit or each in its own.
+    """:func:`prepare` two shapes for matching, in their :func:`common_unit`.
 
     Parameters
     ----------
@@ -219,21 +253,11 @@ def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tu
     min_vertices : int
         As in :func:`prepare`.
     scale : {"auto", "larger", "each"}
-        "larger": both in units of sqrt(area) of the larger one, so that a part keeps
-        its size relative to the whole (each prepared alone would be blown up to unit
-        area, and every geodesic distance the pairwise term compares with the other
-        shape's would be off by sqrt(area ratio)); "each": each to unit area; "auto":
-        "larger" when the smaller has less than ``PARTIAL_AREA`` of the larger's area,
-        else "each".
+        As in :func:`common_unit`.
     """
     first, second = prepare(a, min_vertices), prepare(b, min_vertices)
-    if scale == "auto":
-        ratio = (min(first.scale, second.scale) / max(first.scale, second.scale)) ** 2
-        scale = "larger" if ratio < PARTIAL_AREA else "each"
-    if scale == "each":
-        return first, second
-    unit = max(first.scale, second.scale)
-    return rescaled(first, first.scale / unit), rescaled(second, second.scale / unit)
+    unit = common_unit(first, second, scale)
+    return in_unit(first, unit), in_unit(second, unit)
 
 
 def as_shape(obj: ShapeLike) -> Shape:
@@ -242,10 +266,13 @@ def as_shape(obj: ShapeLike) -> Shape:
     The vertices keep the input's order: a file's (:func:`intrinsym.mesh.io.load`), the
     rows of an array, a trimesh object's ``vertices``. An array is read as a point
     cloud; one that is not (N, 3), holds NaN or infinity, or has fewer than 4 rows is
-    an :class:`~intrinsym.errors.InputError`.
+    an :class:`~intrinsym.errors.InputError`. A :class:`Surface` gives the shape it was
+    prepared from.
     """
     if isinstance(obj, Shape):
         return obj
+    if isinstance(obj, Surface) and obj.input_shape is not None:
+        return obj.input_shape
     if isinstance(obj, (str, os.PathLike)):
         return io.load(obj)
     if isinstance(obj, tuple):

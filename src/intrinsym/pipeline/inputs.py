@@ -9,9 +9,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import ParameterError
+from ..mesh.shape import Shape
 from ..mrf import bp
 from ..params import WORK_PER_SAMPLE, Params, make_params
-from ..surface import Surface, sample
+from ..surface import Surface, sample, serves
+from ..surface import prepare as prepare_surface
 
 
 def resolve_params(params: Params | None, preset: str, **common: Any) -> Params:
@@ -37,6 +39,27 @@ def min_vertices(p: Params) -> int:
     has this many (``WORK_PER_SAMPLE`` times the larger sample count; 0 when neither is
     given)."""
     return WORK_PER_SAMPLE * max(p.n_source or 0, p.n_target or 0)
+
+
+def working_surface(given: Shape | Surface, p: Params) -> Surface:
+    """The working surface of an input for a run with parameters ``p``: a shape prepared
+    (:func:`~intrinsym.surface.prepare`) for their working size, or a
+    :class:`~intrinsym.surface.Surface` given, not prepared again.
+
+    Raises
+    ------
+    ParameterError
+        A Surface prepared for another working size.
+    """
+    if not isinstance(given, Surface):
+        return prepare_surface(given, min_vertices(p))
+    if not serves(given, min_vertices(p)):
+        raise ParameterError(
+            f"the surface was prepared for a working size of {given.min_vertices} vertices (it has "
+            f"{len(given.shape.vertices)}); n_source={p.n_source}, n_target={p.n_target} need "
+            f"{min_vertices(p)}: prepare it with these parameters, intrinsym.prepare(shape, params)"
+        )
+    return given
 
 
 def sample_pair(src: Surface, tgt: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:

@@ -20,14 +20,14 @@ from ..progress import ProgressCallback
 from ..result.modes import two_modes
 from ..result.result import Result
 from ..result.runinfo import PassStats
-from ..surface import ShapeLike, Surface, as_shape, prepare_pair, serves
-from .inputs import check_machine, min_vertices, resolve_params, sample_pair
+from ..surface import ShapeLike, Surface, as_shape, common_unit, in_unit, prepare, serves
+from .inputs import check_machine, resolve_params, sample_pair, working_surface
 from .stages import Clock, run_bp, solve
 
 
 def match(
-    a: ShapeLike,
-    b: ShapeLike,
+    a: ShapeLike | Surface,
+    b: ShapeLike | Surface,
     params: Params | None = None,
     *,
     n_source: int | None = None,
@@ -47,7 +47,10 @@ def match(
     Laplace-Beltrami spectrum, and so its WKS, is not the whole's). Otherwise each is
     normalised to unit area, so near-isometric frames of one object match whatever their
     units (``params.match_scale`` decides).
-    Parameters as in :func:`detect`; the trivial match does not apply.
+    Parameters as in :func:`detect`; the trivial match does not apply. Either shape may
+    be a :class:`~intrinsym.surface.Surface` from :func:`prepare`, not prepared again:
+    a whole matched to many parts is prepared once, and its eigenpairs and chord graph
+    serve every part's map (the result is the one of the shape itself).
 
     When the source A is the part (meshes, ``params.part_fmap``), its vertex map is the
     extraction's or a partial functional map's
@@ -102,7 +105,9 @@ def match(
     sa, sb = as_shape(a), as_shape(b)
     symmetry = None if target_symmetry is None else checked_symmetry(target_symmetry, len(sb.vertices))
     clock.lap("load")
-    surf_a, surf_b = prepare_pair(sa, sb, min_vertices(p), p.match_scale)
+    first, second = (working_surface(x if isinstance(x, Surface) else s, p) for x, s in ((a, sa), (b, sb)))
+    unit = common_unit(first, second, p.match_scale)
+    surf_a, surf_b = in_unit(first, unit), in_unit(second, unit)
     area_a, area_b = surface_area(surf_a.shape), surface_area(surf_b.shape)
     part = min(area_a, area_b) < PARTIAL_AREA
     if part:
@@ -118,7 +123,7 @@ def match(
     if not part:
         return _with_mode_marginals(result, clock)
     if not target_part:
-        result = _with_part_map(result, surf_a, surf_b, (sa, sb), p)
+        result = _with_part_map(result, surf_a, surf_b, (sa, sb, unit), p)
         clock.lap("part map")
         return _with_mode_marginals(result, clock)
     # The target is the part: every source sample takes a label, so the source vertices
@@ -181,16 +186,24 @@ def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarr
     return vmap.astype(np.int64)
 
 
-def _with_part_map(result: Result, part: Surface, whole: Surface, shapes: tuple[Shape, Shape], p: Params) -> Result:
+def _with_part_map(
+    result: Result, part: Surface, whole: Surface, inputs: tuple[Shape, Shape, float | None], p: Params
+) -> Result:
     """A part's match to its whole with the vertex map :func:`part_vertex_map` keeps
     (``global_map``, ``info.part_map``); with ``p.part_fmap`` off or a point cloud, the
     extraction's map as it is, measured. The partial functional map and the
-    refinement are solved on the two meshes as given (``shapes``, the part and the whole,
-    prepared again without refinement when either was refined)."""
+    refinement are solved on the two meshes as given (``inputs``: the part, the whole and
+    their common unit; a surface that was refined is prepared again without refinement,
+    one that was not serves as it is, with what it keeps)."""
     if not (p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None):
         _, stats = choose_part_map(result.symmetry_map(), part, whole)
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
-    given = (part, whole) if serves(part, 0) and serves(whole, 0) else prepare_pair(*shapes, 0, p.match_scale)
+    shape_part, shape_whole, unit = inputs
+
+    def unrefined(surface: Surface, shape: Shape) -> Surface:
+        return surface if serves(surface, 0) else in_unit(prepare(shape, 0), unit)
+
+    given = (unrefined(part, shape_part), unrefined(whole, shape_whole))
     marginals = (result.marginals, result.source_point_vertex, result.target_point_vertex)
     image, stats = part_vertex_map(result.symmetry_map(), part, whole, given, p, marginals)
     info = dataclasses.replace(result.info, part_map=stats)
