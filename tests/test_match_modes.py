@@ -14,7 +14,7 @@ import intrinsym
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
 from intrinsym.geodesics._dijkstra import ball_pairs, csr_arrays
-from intrinsym.globalmap import confidence, distortion, part_map
+from intrinsym.globalmap import confidence, distortion, part_map, partial_fmap
 from intrinsym.globalmap.part_map import PartMapStats
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import from_arrays, surface_area
@@ -70,10 +70,10 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
 
 
 def test_the_matches_onto_one_prepared_whole_are_those_of_its_shape(half_and_whole, half_matched, monkeypatch):
-    """A whole prepared once (:func:`intrinsym.prepare`) and given to every match onto it:
-    the arrays of the match of the shape itself, and from the second match on only the
-    part's Laplace-Beltrami eigenpairs are solved (the whole keeps its own); a whole
-    prepared for another working size is refused."""
+    """A whole prepared once (:func:`intrinsym.prepare`) and given to the matches onto it:
+    the arrays of the match of the shape itself, and the part's map solved the whole's
+    Laplace-Beltrami eigenpairs on that surface, which keeps them for the next match; a
+    surface prepared for another working size is refused."""
     half, whole, _ = half_and_whole
     p = intrinsym.make_params(**SMALL)
     prepared = intrinsym.prepare(whole, p)
@@ -84,14 +84,14 @@ def test_the_matches_onto_one_prepared_whole_are_those_of_its_shape(half_and_who
         (first.mode_marginals, half_matched.mode_marginals),
     ]:
         np.testing.assert_array_equal(got, want)
-    solved: list[int] = []
-    solve = laplacian.eigenpairs
-    monkeypatch.setattr(laplacian, "eigenpairs", lambda v, *rest: solved.append(len(v)) or solve(v, *rest))
-    again = intrinsym.match(half, prepared, p)
-    np.testing.assert_array_equal(again.global_map, first.global_map)
-    assert solved and len(prepared.shape.vertices) not in solved
-    with pytest.raises(intrinsym.ParameterError, match="working size of 8000 vertices.*need 800"):
-        intrinsym.match(half, intrinsym.prepare(whole), p)
+
+    def solve_again(*args):
+        raise AssertionError("the whole's eigenpairs were not kept")
+
+    monkeypatch.setattr(laplacian, "eigenpairs", solve_again)
+    prepared.eigenpairs(min(partial_fmap.EIGENPAIRS, len(prepared.shape.vertices) - 1), 0)
+    with pytest.raises(intrinsym.ParameterError, match="working size of 2400 vertices.*need 800"):
+        intrinsym.match(intrinsym.prepare(half, n_target=1200), whole, p)
 
 
 def test_a_part_and_its_whole_sample_part_targets_of_n_target(half_matched):
