@@ -17,6 +17,7 @@ from intrinsym.extract.symmetry import Extraction
 from intrinsym.globalmap import confidence, vertex_maps
 from intrinsym.globalmap.distortion import local_distortion
 from intrinsym.globalmap.globalmap import supported_map
+from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import Shape, surface_area
 from intrinsym.mrf import bp
 from intrinsym.params import MAP_MARGIN
@@ -333,6 +334,21 @@ def test_a_prepared_surface_serves_the_counts_of_its_working_size(spot):
         intrinsym.detect(fine, intrinsym.make_params(**SMALL))
     with pytest.raises(intrinsym.ParameterError, match="need 8000"):
         intrinsym.detect(small)
+
+
+def test_a_refined_prepared_surface_detects_as_its_shape(monkeypatch):
+    """``detect(prepare(shape))`` is ``detect(shape)`` when the preparation subdivided the
+    mesh: both solve the self map on the mesh as given (the surface keeps the shape it
+    was prepared from), not one on the refined working mesh (then their statistics
+    differed). The self map runs because the global map is said to stay put."""
+    g = shapes.partial(4)  # 930 vertices: subdivided for 470 targets
+    p = intrinsym.make_params(n_source=20, n_target=470, spin_cloud=1000, iterations=10)
+    monkeypatch.setattr(pipeline.self_matching, "fixed_share", lambda vertex_map, surface, radius: 0.9)
+    surface = intrinsym.prepare((g.vertices, g.faces), p)
+    assert surface.subdivided
+    a, b = intrinsym.detect((g.vertices, g.faces), p), intrinsym.detect(surface, p)
+    assert a.info.self_map is not None and a.info.self_map == b.info.self_map
+    np.testing.assert_array_equal(a.symmetry_map(), b.symmetry_map())
 
 
 def test_residual_schedule_end_to_end(spot_surface, spot_result):

@@ -131,8 +131,7 @@ def detect(
     result = solve(sampled(surf, surf, ps, pt, p, True), p, clock, header)
     if not p.self_hypotheses or surf.shape.faces is None:
         return result
-    # a Surface given keeps only its working mesh: the hypotheses are solved on that
-    given = surf if isinstance(s, Surface) or serves(surf, 0) else prepare_surface(s, 0)
+    given = surf if serves(surf, 0) else prepare_surface(as_shape(s), 0)
     trivial = None
     if result.global_map is not None:
         trivial = fixed_share(result.global_map, given, p.trivial_radius)
