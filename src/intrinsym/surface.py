@@ -56,8 +56,8 @@ class Surface:
     subdivided : bool
         Whether the cleaned mesh was subdivided to reach it.
     input_shape : Shape or None
-        The shape it was prepared from (:func:`as_shape` returns it): what ``match``
-        prepares again, without subdivision, for a part's map.
+        The shape it was prepared from (:func:`as_shape` returns it): what ``detect``'s
+        self map and a part's map in ``match`` prepare again, without subdivision.
     """
 
     shape: Shape

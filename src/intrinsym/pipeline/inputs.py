@@ -41,7 +41,7 @@ def min_vertices(p: Params) -> int:
     return WORK_PER_SAMPLE * max(p.n_source or 0, p.n_target or 0)
 
 
-def working_surface(given: Shape | Surface, p: Params) -> Surface:
+def working_surface(shape: Shape | Surface, p: Params) -> Surface:
     """The working surface of an input for a run with parameters ``p``: a shape prepared
     (:func:`~intrinsym.surface.prepare`) for their working size, or a
     :class:`~intrinsym.surface.Surface` given, not prepared again.
@@ -51,15 +51,15 @@ def working_surface(given: Shape | Surface, p: Params) -> Surface:
     ParameterError
         A Surface prepared for another working size.
     """
-    if not isinstance(given, Surface):
-        return prepare_surface(given, min_vertices(p))
-    if not serves(given, min_vertices(p)):
+    if not isinstance(shape, Surface):
+        return prepare_surface(shape, min_vertices(p))
+    if not serves(shape, min_vertices(p)):
         raise ParameterError(
-            f"the surface was prepared for a working size of {given.min_vertices} vertices (it has "
-            f"{len(given.shape.vertices)}); n_source={p.n_source}, n_target={p.n_target} need "
+            f"the surface was prepared for a working size of {shape.min_vertices} vertices (it has "
+            f"{len(shape.shape.vertices)}); n_source={p.n_source}, n_target={p.n_target} need "
             f"{min_vertices(p)}: prepare it with these parameters, intrinsym.prepare(shape, params)"
         )
-    return given
+    return shape
 
 
 def sample_pair(src: Surface, tgt: Surface, p: Params) -> tuple[np.ndarray, np.ndarray]:

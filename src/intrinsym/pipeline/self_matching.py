@@ -56,9 +56,9 @@ def prepare(
     -------
     Surface
         :func:`detect` and :func:`match` take it in place of the shape with any
-        parameters whose sample counts ask for the same working size (any counts when no subdivision was needed);
-        with others it raises :class:`~intrinsym.errors.ParameterError` rather than
-        prepare again.
+        parameters whose sample counts ask for the same working size (any counts when
+        no subdivision was needed); with others they raise
+        :class:`~intrinsym.errors.ParameterError` rather than prepare again.
     """
     p = resolve_params(params, preset, n_source=n_source, n_target=n_target)
     return prepare_surface(as_shape(shape), min_vertices(p))
