@@ -39,8 +39,10 @@ class Surface:
     ----------
     shape : Shape
         Normalised (centred, unit area), cleaned, possibly subdivided working shape.
-    input_vertices : (N_in, 3) float64
-        Vertices of the file as read, for output coordinates.
+    input_shape : Shape
+        The shape it was prepared from (:func:`as_shape` returns it): what ``detect``'s
+        self map and a part's map in ``match`` prepare again without subdivision
+        (:func:`unrefined`).
     vertex_map : (N_in,) int64
         Working vertex representing each input vertex.
     center : (3,) float64
@@ -55,13 +57,10 @@ class Surface:
         parameters it was prepared with, :func:`intrinsym.prepare`).
     subdivided : bool
         Whether the cleaned mesh was subdivided to reach it.
-    input_shape : Shape or None
-        The shape it was prepared from (:func:`as_shape` returns it): what ``detect``'s
-        self map and a part's map in ``match`` prepare again, without subdivision.
     """
 
     shape: Shape
-    input_vertices: np.ndarray
+    input_shape: Shape
     vertex_map: np.ndarray
     center: np.ndarray
     scale: float
@@ -69,7 +68,6 @@ class Surface:
     normals: np.ndarray
     min_vertices: int = 0
     subdivided: bool = False
-    input_shape: Shape | None = None
     _spectra: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = dataclasses.field(
         default_factory=dict, init=False, repr=False, compare=False
     )
@@ -132,6 +130,11 @@ class Surface:
         return geodesics.surface_graph(self.shape.vertices, self.shape.faces, rings=1)
 
     @cached_property
+    def input_vertices(self) -> np.ndarray:
+        """Vertices of the input shape as read, (N_in, 3) float64, for output coordinates."""
+        return np.asarray(self.input_shape.vertices, dtype=np.float64)
+
+    @cached_property
     def working_inputs(self) -> np.ndarray:
         """The input vertex nearest every working vertex, (N_working,) int64, found once
         (a part's match maps between input vertices a dozen times)."""
@@ -173,7 +176,7 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
     work = Shape(vertices, faces, shape.path)
     return Surface(
         shape=work,
-        input_vertices=np.asarray(shape.vertices, dtype=np.float64),
+        input_shape=shape,
         vertex_map=vertex_map,
         center=center,
         scale=scale,
@@ -181,7 +184,6 @@ def prepare(shape: Shape, min_vertices: int = 0) -> Surface:
         normals=vertex_normals(work),
         min_vertices=min_vertices,
         subdivided=subdivided,
-        input_shape=shape,
     )
 
 
@@ -244,6 +246,15 @@ def in_unit(surface: Surface, unit: float | None) -> Surface:
     return surface if unit is None else rescaled(surface, surface.scale / unit)
 
 
+def unrefined(surface: Surface, unit: float | None = None) -> Surface:
+    """``surface`` as :func:`prepare` gives it without subdivision, in ``unit`` (input
+    length; None: its own, unit area): the surface itself, with what it keeps, when it
+    was not subdivided, else its input shape prepared again. The meshes as given, on which
+    a self map and a part's map are solved (a refined mesh's chords and spectra are not
+    the input's)."""
+    return surface if serves(surface, 0) else in_unit(prepare(surface.input_shape, 0), unit)
+
+
 def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tuple[Surface, Surface]:
     """:func:`prepare` two shapes for matching, in their :func:`common_unit`.
 
@@ -271,7 +282,7 @@ def as_shape(obj: ShapeLike) -> Shape:
     """
     if isinstance(obj, Shape):
         return obj
-    if isinstance(obj, Surface) and obj.input_shape is not None:
+    if isinstance(obj, Surface):
         return obj.input_shape
     if isinstance(obj, (str, os.PathLike)):
         return io.load(obj)

@@ -11,7 +11,7 @@ from ..params import Params
 from ..problem import sampled
 from ..progress import ProgressCallback
 from ..result.result import Result
-from ..surface import ShapeLike, Surface, as_shape, serves
+from ..surface import ShapeLike, Surface, as_shape, unrefined
 from ..surface import prepare as prepare_surface
 from .inputs import check_machine, min_vertices, resolve_params, sample_pair, working_surface
 from .stages import Clock, solve
@@ -131,7 +131,7 @@ def detect(
     result = solve(sampled(surf, surf, ps, pt, p, True), p, clock, header)
     if not p.self_hypotheses or surf.shape.faces is None:
         return result
-    given = surf if serves(surf, 0) else prepare_surface(as_shape(s), 0)
+    given = unrefined(surf)
     trivial = None
     if result.global_map is not None:
         trivial = fixed_share(result.global_map, given, p.trivial_radius)

@@ -20,7 +20,7 @@ from ..progress import ProgressCallback
 from ..result.modes import two_modes
 from ..result.result import Result
 from ..result.runinfo import PassStats
-from ..surface import ShapeLike, Surface, as_shape, common_unit, in_unit, prepare, serves
+from ..surface import ShapeLike, Surface, as_shape, common_unit, in_unit, unrefined
 from .inputs import check_machine, resolve_params, sample_pair, working_surface
 from .stages import Clock, run_bp, solve
 
@@ -124,7 +124,7 @@ def match(
     if not part:
         return _with_mode_marginals(result, clock)
     if not target_part:
-        result = _with_part_map(result, surf_a, surf_b, (sa, sb, unit), p)
+        result = _with_part_map(result, surf_a, surf_b, unit, p)
         clock.lap("part map")
         return _with_mode_marginals(result, clock)
     # The target is the part: every source sample takes a label, so the source vertices
@@ -187,24 +187,16 @@ def checked_symmetry(symmetry: np.ndarray | Result, n_vertices: int) -> np.ndarr
     return vmap.astype(np.int64)
 
 
-def _with_part_map(
-    result: Result, part: Surface, whole: Surface, inputs: tuple[Shape, Shape, float | None], p: Params
-) -> Result:
+def _with_part_map(result: Result, part: Surface, whole: Surface, unit: float | None, p: Params) -> Result:
     """A part's match to its whole with the vertex map :func:`part_vertex_map` keeps
     (``global_map``, ``info.part_map``); with ``p.part_fmap`` off or a point cloud, the
     extraction's map as it is, measured. The partial functional map and the
-    refinement are solved on the two meshes as given (``inputs``: the part, the whole and
-    their common unit; a surface that was refined is prepared again without refinement,
-    one that was not serves as it is, with what it keeps)."""
+    refinement are solved on the two meshes as given, in their common ``unit``
+    (:func:`~intrinsym.surface.unrefined`)."""
     if not (p.part_fmap and part.shape.faces is not None and whole.shape.faces is not None):
         _, stats = choose_part_map(result.symmetry_map(), part, whole)
         return dataclasses.replace(result, info=dataclasses.replace(result.info, part_map=stats))
-    shape_part, shape_whole, unit = inputs
-
-    def unrefined(surface: Surface, shape: Shape) -> Surface:
-        return surface if serves(surface, 0) else in_unit(prepare(shape, 0), unit)
-
-    given = (unrefined(part, shape_part), unrefined(whole, shape_whole))
+    given = (unrefined(part, unit), unrefined(whole, unit))
     marginals = (result.marginals, result.source_point_vertex, result.target_point_vertex)
     image, stats = part_vertex_map(result.symmetry_map(), part, whole, given, p, marginals)
     info = dataclasses.replace(result.info, part_map=stats)
