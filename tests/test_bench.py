@@ -22,6 +22,7 @@ def test_message_timing_compares_equal_messages():
     assert diff < 1e-5  # float32 sparse kernel against the float64 dense Eq. 7
 
 
+@pytest.mark.slow  # the small benchmark with its dense reference, 3-4 s (CI: -m slow); messages: test_bp.py
 def test_bench_small_json(capsys):
     assert main(["bench", "--small", "--json", "--iterations", "2"]) == 0
     (res,) = json.loads(capsys.readouterr().out)

@@ -69,6 +69,7 @@ def test_larger_scale_keeps_the_parts_size(half_and_whole):
     assert surface_area(a.shape) == pytest.approx(1.0) and surface_area(b.shape) == pytest.approx(1.0)
 
 
+@pytest.mark.slow  # a second match of the half, 4-5 s, to compare with the module's (CI: -m slow)
 def test_the_matches_onto_one_prepared_whole_are_those_of_its_shape(half_and_whole, half_matched, monkeypatch):
     """A whole prepared once (:func:`intrinsym.prepare`) and given to the matches onto it:
     the arrays of the match of the shape itself, and the part's map solved the whole's
@@ -269,6 +270,7 @@ def _answer_masses(
     return masses[0], masses[1], far
 
 
+@pytest.mark.slow  # a match of spot's half with BP given each mode, 6 s (CI: -m slow)
 def test_a_parts_marginals_hold_both_answers_given_each_mode():
     """Spot's upper half matched to spot (40 / 400, the part's 'row' widths): BP given
     each mode (``mode_marginals``) keeps each row's mass about that mode's image, and

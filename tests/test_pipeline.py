@@ -336,6 +336,7 @@ def test_a_prepared_surface_serves_the_counts_of_its_working_size(spot):
         intrinsym.detect(small)
 
 
+@pytest.mark.slow  # two detects of the refined partial shape, 3-4 s (CI: -m slow)
 def test_a_refined_prepared_surface_detects_as_its_shape(monkeypatch):
     """``detect(prepare(shape))`` is ``detect(shape)`` when the preparation subdivided the
     mesh: both solve the self map on the mesh as given (the surface keeps the shape it
