@@ -352,29 +352,6 @@ def test_a_refined_prepared_surface_detects_as_its_shape(monkeypatch):
     np.testing.assert_array_equal(a.symmetry_map(), b.symmetry_map())
 
 
-def test_the_identity_removed_run_ends_once_no_global_symmetry_is_settled(monkeypatch):
-    """``trivial_weight="auto"`` reads only its decision from the run with the identity
-    removed when the decision is "no global symmetry" (BP runs again with it kept), so
-    that run ends once the decision is settled (``no_global_symmetry_settled``): the
-    result is the one of the run carried on, in fewer iterations. Thresholds of 1 make
-    the star's decision "no global symmetry"; the rule acts from iteration 1 here."""
-    star = shapes.star(resolution=2)
-    p = intrinsym.make_params(
-        n_source=30, n_target=300, spin_cloud=5000, iterations=5, zoomout=False,
-        isometry_threshold=1.0, reflection_threshold=1.0,
-    )  # fmt: skip
-    monkeypatch.setattr(pipeline.stages, "SETTLED_AFTER", 1)
-    results = {}
-    for margin in (0.0, 2.0):  # 2: never settled
-        monkeypatch.setattr(pipeline.stages, "SETTLED_MARGIN", margin)
-        results[margin] = intrinsym.detect((star.vertices, star.faces), p)
-    settled, carried = results[0.0].info.identity, results[2.0].info.identity
-    assert settled.weight == carried.weight == intrinsym.params.NO_PARTNER_WEIGHT
-    assert settled.removed_iterations < carried.removed_iterations == p.iterations
-    np.testing.assert_array_equal(results[0.0].marginals, results[2.0].marginals)
-    np.testing.assert_array_equal(results[0.0].symmetry_map(), results[2.0].symmetry_map())
-
-
 def test_residual_schedule_end_to_end(spot_surface, spot_result):
     res = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
     colour = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="colour", **dict(SMALL, iterations=100)))

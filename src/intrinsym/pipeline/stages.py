@@ -1,8 +1,7 @@
 """The stages shared by :func:`~intrinsym.pipeline.detect` and
 :func:`~intrinsym.pipeline.match`, from the samples onwards: the pairwise and unary
 terms (:func:`pairwise_model`, :func:`unary_model`), BP (:func:`solve_bp`), the identity
-decision of ``trivial_weight="auto"`` (:func:`decide_identity`; its BP run ends early by
-:func:`no_global_symmetry_settled`), the extraction
+decision of ``trivial_weight="auto"`` (:func:`decide_identity`), the extraction
 (:func:`extraction_support`, :func:`extract_symmetries`) and the global map, run in
 order by :func:`solve`.
 """
@@ -12,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,16 +31,6 @@ from ..result.runinfo import BPStats, GlobalMapStats, IdentityDecision, PassStat
 from ..unary import unary
 
 log = logging.getLogger("intrinsym")
-
-#: The identity-removed run of ``trivial_weight="auto"`` may end from this iteration on
-#: (:func:`no_global_symmetry_settled`) ...
-SETTLED_AFTER = 5
-#: ... when both statistics of the decision lie this far below their thresholds. Over the
-#: 36 complete shapes with ground truth and the 125 SHREC'16 partial ones, seeds 0 and 1,
-#: no run whose decision is "global" comes within 0.128 of that from iteration 5 on (the
-#: nearest dips 0.022 below the thresholds), and a stopped run's statistics move by at
-#: most 0.084 before it would converge (docs/notes/2026-11-28-speed-behind-the-defaults.md).
-SETTLED_MARGIN = 0.15
 
 
 class Clock:
@@ -149,10 +137,9 @@ class BPOutcome:
     identity: IdentityDecision | None
 
 
-def run_bp(mrf: model.MRF, p: Params, progress: ProgressCallback | None, stop: bp.Stop | None = None) -> bp.BPResult:
+def run_bp(mrf: model.MRF, p: Params, progress: ProgressCallback | None) -> bp.BPResult:
     """BP on ``mrf`` with the schedule, iterations, tolerance, damping, seed, dtype and
-    backend of ``p``, each iteration reported to ``progress``, ending early where ``stop``
-    says (:func:`intrinsym.mrf.bp.belief_propagation`)."""
+    backend of ``p``, each iteration reported to ``progress``."""
 
     def on_iteration(it: int, change: float) -> None:
         log.debug("bp iteration %d: max message change %.3g", it, change)
@@ -169,15 +156,7 @@ def run_bp(mrf: model.MRF, p: Params, progress: ProgressCallback | None, stop: b
         np.dtype(p.dtype).type,
         on_iteration,
         backend=p.backend,
-        stop=stop,
     )
-
-
-def removes_trivial(self_match: bool, p: Params) -> bool:
-    """Whether BP's trivial match is weakened (self-matching, ``remove_trivial``, a
-    positive ``trivial_radius``): the runs of :func:`solve_bp` record the identity's
-    treatment, decided after BP for ``trivial_weight="auto"``."""
-    return self_match and p.remove_trivial and p.trivial_radius > 0
 
 
 def solve_bp(
@@ -190,13 +169,12 @@ def solve_bp(
     n_passes: int,
     progress: ProgressCallback | None,
     weight: float | None = None,
-    stop: bp.Stop | None = None,
 ) -> BPOutcome:
     """BP on the MRF (``mrf.unary`` is replaced by ``phi`` with the trivial match
     weakened to ``weight``, default ``p.trivial_weight``, 0 for "auto"), then the
     further passes. The identity decision of "auto" (BP again at ``NO_PARTNER_WEIGHT``)
-    is :func:`solve`'s; ``stop`` may end the first run early (:func:`run_bp`)."""
-    trivial = removes_trivial(self_match, p)
+    is :func:`solve`'s."""
+    trivial = self_match and p.remove_trivial and p.trivial_radius > 0
     if weight is None:
         weight = 0.0 if p.trivial_weight == "auto" else float(p.trivial_weight)
 
@@ -204,7 +182,7 @@ def solve_bp(
         model.suppress_trivial(phi, near, p.trivial_radius, floor, weight) if trivial and near is not None else phi
     )
     mrf = dataclasses.replace(mrf, unary=weakened.astype(np.float32))
-    runs = [run_bp(mrf, p, progress, stop)]
+    runs = [run_bp(mrf, p, progress)]
     first_unary = mrf.unary
     marginals = runs[0].marginals.astype(np.float32)
     passes: list[tuple[np.ndarray, np.ndarray]] = []
@@ -250,38 +228,6 @@ def extract_symmetries(problem: Problem, support: Support, outcome: BPOutcome, p
     )
 
 
-def identity_statistics(problem: Problem, pair: Pairwise, marginals: np.ndarray, p: Params) -> tuple[float, float]:
-    """The two statistics of the identity decision on marginals ``(S, T)``: the share of
-    source edges their argmax keeps (within ``d_error`` or the target spacing), and the
-    share of source samples at which it acts as a reflection."""
-    image = marginals.argmax(axis=1)
-    graph = SourceGraph.from_edges(problem.edges, problem.edge_length, len(marginals))
-    kept = consistency(image, graph, pair.targets, max(p.d_error, problem.t_spacing))
-    normals, ps, pt = problem.src.normals, problem.ps, problem.pt
-    acts = reflection(
-        image, problem.edges, problem.source_points, problem.target_points, normals[ps], normals[pt], RETURN_RADIUS
-    )
-    return kept, acts
-
-
-def no_global_symmetry_settled(problem: Problem, pair: Pairwise, p: Params) -> bp.Stop:
-    """BP's ``stop`` for the identity-removed run of ``trivial_weight="auto"``: end it
-    from iteration :data:`SETTLED_AFTER` on once its argmax keeps fewer source edges than
-    ``isometry_threshold`` and acts as a reflection at fewer samples than
-    ``reflection_threshold``, each by :data:`SETTLED_MARGIN`. Only the decision is read
-    from that run when it says "no global symmetry" (BP runs again with the identity
-    kept), and its statistics move little after the first iterations while BP can wander
-    for dozens more."""
-
-    def stop(iterations: int, marginals: Callable[[], np.ndarray]) -> bool:
-        if iterations < SETTLED_AFTER:
-            return False
-        kept, acts = identity_statistics(problem, pair, marginals(), p)
-        return kept < p.isometry_threshold - SETTLED_MARGIN and acts < p.reflection_threshold - SETTLED_MARGIN
-
-    return stop
-
-
 def decide_identity(problem: Problem, pair: Pairwise, outcome: BPOutcome, p: Params) -> IdentityDecision:
     """The decision of ``trivial_weight="auto"`` on an identity-removed BP outcome: the
     weight the trivial match gets (0: a global symmetry, ``NO_PARTNER_WEIGHT``: partial).
@@ -295,7 +241,13 @@ def decide_identity(problem: Problem, pair: Pairwise, outcome: BPOutcome, p: Par
     an invented self-map does not: either test makes the symmetry global. Self-matching:
     both sample sets lie on ``problem.src``.
     """
-    kept, acts = identity_statistics(problem, pair, outcome.marginals, p)
+    image = outcome.marginals.argmax(axis=1)
+    graph = SourceGraph.from_edges(problem.edges, problem.edge_length, len(outcome.marginals))
+    kept = consistency(image, graph, pair.targets, max(p.d_error, problem.t_spacing))
+    normals, ps, pt = problem.src.normals, problem.ps, problem.pt
+    acts = reflection(
+        image, problem.edges, problem.source_points, problem.target_points, normals[ps], normals[pt], RETURN_RADIUS
+    )
     partial = kept < p.isometry_threshold and acts < p.reflection_threshold
     return IdentityDecision(
         NO_PARTNER_WEIGHT if partial else 0.0,
@@ -374,11 +326,9 @@ def solve(problem: Problem, p: Params, clock: Clock, header: dict) -> Result:
     clock.lap("descriptors")
     mrf = model.MRF(phi.astype(np.float32), edges, problem.edge_length, pair.targets, pair.lam, p.rho)
     clock.lap("unary")
-    decides = removes_trivial(self_match, p) and p.trivial_weight == "auto"
-    settled = no_global_symmetry_settled(problem, pair, p) if decides else None
-    outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, stop=settled)
+    outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress)
     unsure = False
-    if decides:
+    if outcome.identity is not None and p.trivial_weight == "auto":
         identity = decide_identity(problem, pair, outcome, p)
         if identity.weight > 0:
             outcome = solve_bp(mrf, phi, floor, near, p, self_match, n_passes, clock.progress, NO_PARTNER_WEIGHT)

@@ -151,9 +151,7 @@ class IdentityDecision:
     threshold : float or None
         The threshold it was compared with.
     removed_iterations : int or None
-        BP iterations of the run with the identity removed, when BP ran again with it kept
-        (that run ends once its "no global symmetry" is settled:
-        :func:`intrinsym.pipeline.stages.no_global_symmetry_settled`).
+        BP iterations of the run with the identity removed, when BP ran again with it kept.
     reflection : float or None
         With ``trivial_weight="auto"``: the share of source samples at which BP's argmax
         acted as a reflection (:func:`intrinsym.extract.reflection.reflection`).

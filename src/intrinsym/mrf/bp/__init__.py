@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..model import MRF
-from .common import BPResult, Stop, beliefs, check_arguments, initial_messages, iterate, run_schedule
+from .common import BPResult, beliefs, check_arguments, initial_messages, iterate, run_schedule
 from .cpu import MAX_WEIGHT_DEGREE, belief_propagation_cpu, sparse_sweep, weight_polynomial
 from .dense import belief_propagation_dense
 from .gpu import available as gpu_available
@@ -47,7 +47,6 @@ __all__ = [
     "MAX_WEIGHT_DEGREE",
     "SCHEDULES",
     "Steps",
-    "Stop",
     "active_steps",
     "belief_propagation",
     "belief_propagation_cpu",
@@ -117,7 +116,6 @@ def belief_propagation(
     progress: Callable[[int, float], None] | None = None,
     backend: str = "auto",
     initial: np.ndarray | None = None,
-    stop: Stop | None = None,
 ) -> BPResult:
     """Loopy sum-product BP with the exact sparse ring message.
 
@@ -154,11 +152,6 @@ def belief_propagation(
     initial : (2E, T) array, optional
         Messages to start from (directed edge d = 2e + k sends from ``edges[e, k]``),
         finite and positive; default all ones (paper Sec. 4).
-    stop : callable(iterations, marginals) -> bool, optional
-        Called after every iteration that did not converge, with the iterations run and a
-        function that computes the current beliefs ((S, T) float64, rows summing to 1);
-        BP ends there when it returns True (``BPResult.stopped``). ``detect`` ends its
-        identity-removed run so once the run's answer, "no global symmetry", is settled.
 
     Returns
     -------
@@ -167,7 +160,5 @@ def belief_propagation(
     started = time.perf_counter()
     check_arguments(mrf.unary, schedule, iterations, damping)
     if resolve_backend(backend, schedule, dtype) == "gpu":
-        return belief_propagation_gpu(mrf, schedule, iterations, tol, damping, seed, progress, initial, stop)
-    return belief_propagation_cpu(
-        mrf, schedule, iterations, tol, damping, seed, dtype, progress, initial, started, stop
-    )
+        return belief_propagation_gpu(mrf, schedule, iterations, tol, damping, seed, progress, initial)
+    return belief_propagation_cpu(mrf, schedule, iterations, tol, damping, seed, dtype, progress, initial, started)

@@ -21,11 +21,6 @@ from .schedule import SCHEDULES, Steps, active_steps, incoming_edges, resolve_sc
 #: ``moved`` (2E,) and returns the largest of all.
 Sweep = Callable[[np.ndarray, np.ndarray, Steps, np.ndarray], float]
 
-#: ``stop(iterations, marginals)``: called after every iteration that did not converge,
-#: with the iterations run and a function that computes the current beliefs of Eq. 8
-#: ((S, T) float64, rows summing to 1); BP ends when it returns True.
-Stop = Callable[[int, Callable[[], np.ndarray]], bool]
-
 
 @dataclass
 class BPResult:
@@ -39,8 +34,6 @@ class BPResult:
         Iterations run.
     converged : bool
         Whether the largest message change fell below the tolerance.
-    stopped : bool
-        Whether the caller's ``stop`` ended BP before it converged.
     max_change : float
         Largest absolute change of a (max-normalised) message in the last iteration.
     history : list of float
@@ -68,7 +61,6 @@ class BPResult:
     updates: list[int] = field(default_factory=list)
     backend: str = "cpu"
     schedule: str = "colour"
-    stopped: bool = False
 
 
 def check_arguments(unary: np.ndarray, schedule: str, iterations: int, damping: float) -> None:
@@ -115,10 +107,8 @@ def iterate(
     iterations: int,
     tol: float,
     progress: Callable[[int, float], None] | None,
-    stop: Callable[[int], bool] | None = None,
-) -> tuple[list[float], list[float], bool, bool]:
-    """Call ``update(iteration)`` (returns the largest message change) until convergence,
-    or until ``stop(iterations run)`` returns True.
+) -> tuple[list[float], list[float], bool]:
+    """Call ``update(iteration)`` (returns the largest message change) until convergence.
 
     Returns
     -------
@@ -128,8 +118,6 @@ def iterate(
         Wall time of every iteration.
     converged : bool
         Whether the change fell below ``tol``.
-    stopped : bool
-        Whether ``stop`` ended the iterations first.
     """
     history: list[float] = []
     seconds: list[float] = []
@@ -141,10 +129,8 @@ def iterate(
         if progress is not None:
             progress(it + 1, change)
         if change < tol:
-            return history, seconds, True, False
-        if stop is not None and stop(it + 1):
-            return history, seconds, False, True
-    return history, seconds, False, False
+            return history, seconds, True
+    return history, seconds, False
 
 
 def run_schedule(
@@ -159,7 +145,6 @@ def run_schedule(
     progress: Callable[[int, float], None] | None,
     started: float,
     initial: np.ndarray | None = None,
-    stop: Stop | None = None,
 ) -> BPResult:
     """Iterate ``sweep(read, write, steps, moved)`` to convergence.
 
@@ -172,7 +157,7 @@ def run_schedule(
     ----------
     unary : (S, T) array
     edges : (E, 2) int
-    schedule, iterations, tol, seed, progress, initial, stop
+    schedule, iterations, tol, seed, progress, initial
         As in :func:`intrinsym.mrf.bp.belief_propagation`.
     dtype : numpy float type
         Storage of the messages and of the returned marginals.
@@ -225,13 +210,7 @@ def run_schedule(
         updates.append(len(steps.out))
         return change
 
-    def current() -> np.ndarray:
-        return beliefs(unary, messages, ptr, directed)
-
     setup = time.perf_counter() - started
-    ended = None if stop is None else (lambda n: stop(n, current))
-    history, seconds, converged, stopped = iterate(update, iterations, tol, progress, ended)
-    marg: np.ndarray = current().astype(dtype)
-    return BPResult(
-        marg, len(history), converged, history[-1], history, seconds, setup, updates, "cpu", schedule, stopped
-    )
+    history, seconds, converged = iterate(update, iterations, tol, progress)
+    marg: np.ndarray = beliefs(unary, messages, ptr, directed).astype(dtype)
+    return BPResult(marg, len(history), converged, history[-1], history, seconds, setup, updates, "cpu", schedule)

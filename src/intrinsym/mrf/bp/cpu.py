@@ -22,7 +22,7 @@ import numpy as np
 from ..._sorted import right
 from ..._threads import map_ranges, worker_pool
 from ..model import MRF
-from .common import BPResult, Stop, Sweep, run_schedule
+from .common import BPResult, Sweep, run_schedule
 from .schedule import Steps, incoming_edges
 
 # Highest degree of the polynomial that replaces exp in psi - rho^2 (see weight_polynomial).
@@ -328,7 +328,6 @@ def belief_propagation_cpu(
     progress: Callable[[int, float], None] | None,
     initial: np.ndarray | None,
     started: float | None = None,
-    stop: Stop | None = None,
 ) -> BPResult:
     """Loopy BP on the CPU with the exact sparse ring message.
 
@@ -343,6 +342,4 @@ def belief_propagation_cpu(
     if started is None:
         started = time.perf_counter()
     sweep = sparse_sweep(mrf, dtype, damping)
-    return run_schedule(
-        mrf.unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress, started, initial, stop
-    )
+    return run_schedule(mrf.unary, mrf.edges, schedule, iterations, tol, seed, dtype, sweep, progress, started, initial)

@@ -18,7 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..model import MRF
-from .common import BPResult, Stop, initial_messages, iterate
+from .common import BPResult, initial_messages, iterate
 from .schedule import (
     GPU_SCHEDULES,
     Steps,
@@ -71,7 +71,6 @@ def belief_propagation_gpu(
     seed: int = 0,
     progress: Callable[[int, float], None] | None = None,
     initial: np.ndarray | None = None,
-    stop: Stop | None = None,
 ) -> BPResult:
     """Loopy BP on the GPU; the messages of the CPU backend's schedule.
 
@@ -159,15 +158,10 @@ def belief_propagation_gpu(
         steps = fixed if fixed is not None else batches(schedule_steps(schedule, orders[it], edges, ptr, directed))
         return max((send(*batch) for batch in steps), default=0.0)
 
-    def current() -> cp.ndarray:
-        b = unary * cp.prod(messages[inc_gpu].astype(cp.float64), axis=1)
-        return b / b.sum(axis=1, keepdims=True)
-
     setup = time.perf_counter() - started
-    ended = None if stop is None else (lambda n: stop(n, lambda: cp.asnumpy(current())))
-    history, seconds, converged, stopped = iterate(update, iterations, tol, progress, ended)
-    marg = cp.asnumpy(current().astype(cp.float32))
-    n_updates = [n_dir] * len(history)
+    history, seconds, converged = iterate(update, iterations, tol, progress)
+    b = unary * cp.prod(messages[inc_gpu].astype(cp.float64), axis=1)
+    marg = cp.asnumpy((b / b.sum(axis=1, keepdims=True)).astype(cp.float32))
     return BPResult(
-        marg, len(history), converged, history[-1], history, seconds, setup, n_updates, "gpu", schedule, stopped
+        marg, len(history), converged, history[-1], history, seconds, setup, [n_dir] * len(history), "gpu", schedule
     )
