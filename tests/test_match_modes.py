@@ -21,7 +21,7 @@ from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.pipeline import invert_part_match, part_params
 from intrinsym.result import modes
 from intrinsym.spectral import laplacian
-from intrinsym.surface import prepare_pair
+from intrinsym.surface import prepare, prepare_pair, unrefined
 
 
 def _cut(vertices: np.ndarray, faces: np.ndarray, z: float) -> tuple[intrinsym.Shape, np.ndarray]:
@@ -93,6 +93,21 @@ def test_the_matches_onto_one_prepared_whole_are_those_of_its_shape(half_and_who
     prepared.eigenpairs(min(partial_fmap.EIGENPAIRS, len(prepared.shape.vertices) - 1), 0)
     with pytest.raises(intrinsym.ParameterError, match="working size of 2400 vertices.*need 800"):
         intrinsym.match(intrinsym.prepare(half, n_target=1200), whole, p)
+
+
+def test_a_refined_whole_is_prepared_again_once_per_unit(half_and_whole):
+    """The meshes as given of a refined surface (:func:`unrefined`) are its input shape
+    prepared without subdivision, kept per unit: every part matched onto one prepared,
+    refined whole solves its map on the same unrefined whole and its eigenpairs. A
+    surface that was not refined is its own."""
+    _, whole, _ = half_and_whole
+    refined = prepare(whole, 2 * len(whole.vertices))
+    assert refined.subdivided
+    once = unrefined(refined, 2.0)
+    assert unrefined(refined, 2.0) is once and unrefined(refined) is not once
+    plain = prepare(whole, 0)
+    np.testing.assert_allclose(once.shape.vertices, plain.shape.vertices * plain.scale / 2.0)
+    assert unrefined(plain, 2.0) is plain
 
 
 def test_a_part_and_its_whole_sample_part_targets_of_n_target(half_matched):

@@ -74,6 +74,9 @@ class Surface:
     _balls: dict[tuple[bytes, float], tuple[np.ndarray, np.ndarray, np.ndarray]] = dataclasses.field(
         default_factory=dict, init=False, repr=False, compare=False
     )
+    _unrefined: dict[float | None, Surface] = dataclasses.field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
 
     def eigenpairs(self, k: int, coarse: int) -> tuple[np.ndarray, np.ndarray]:
         """The working shape's ``k`` smallest Laplace-Beltrami eigenpairs
@@ -248,11 +251,16 @@ def in_unit(surface: Surface, unit: float | None) -> Surface:
 
 def unrefined(surface: Surface, unit: float | None = None) -> Surface:
     """``surface`` as :func:`prepare` gives it without subdivision, in ``unit`` (input
-    length; None: its own, unit area): the surface itself, with what it keeps, when it
-    was not subdivided, else its input shape prepared again. The meshes as given, on which
-    a self map and a part's map are solved (a refined mesh's chords and spectra are not
-    the input's)."""
-    return surface if serves(surface, 0) else in_unit(prepare(surface.input_shape, 0), unit)
+    length, the one ``surface`` is in; None: unit area): the surface itself, with what it
+    keeps, when it was not subdivided, else its input shape prepared again, once per
+    unit (the matches of many parts onto one refined whole share it and its eigenpairs).
+    The meshes as given, on which a self map and a part's map are solved (a refined
+    mesh's chords and spectra are not the input's)."""
+    if serves(surface, 0):
+        return surface
+    if unit not in surface._unrefined:
+        surface._unrefined[unit] = in_unit(prepare(surface.input_shape, 0), unit)
+    return surface._unrefined[unit]
 
 
 def prepare_pair(a: Shape, b: Shape, min_vertices: int, scale: MatchScale) -> tuple[Surface, Surface]:
