@@ -1,4 +1,5 @@
-"""Row ranges on threads: every row once, and the same result on any thread count."""
+"""Row ranges on threads: every row once, and the same result on any thread count; the
+pipeline's BLAS on one thread."""
 
 from __future__ import annotations
 
@@ -8,12 +9,16 @@ import threading
 import numba as nb
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
 
+import intrinsym
 from conftest import sphere_points, unit_sphere
 from intrinsym import _threads
 from intrinsym.geodesics import geodesics
 from intrinsym.globalmap.refine import spectral_descent
+from intrinsym.mesh import generated as shapes
 from intrinsym.mrf.bp import belief_propagation
+from intrinsym.pipeline import self_matching, two_shapes
 from intrinsym.spectral.laplacian import eigenpairs
 from intrinsym.spectral.neighbours import nearest_rows
 from intrinsym.unary.descriptors import nmi, quantize, spin_images
@@ -82,3 +87,35 @@ def test_kernels_give_the_same_result_on_one_thread_and_on_two():
     one, two = _on_threads(1, run), _on_threads(2, run)
     for a, b in zip(one, two, strict=True):
         assert np.array_equal(a, b)
+
+
+def _blas_threads() -> set[int]:
+    """The thread counts of the BLAS libraries loaded (NumPy's and SciPy's may be two)."""
+    return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+
+class _Stop(Exception):
+    """Raised by a patched stage once it has seen the thread count."""
+
+
+@pytest.mark.parametrize("entry", ["detect", "match"])
+def test_detect_and_match_run_blas_on_one_thread_and_give_the_callers_back(entry, monkeypatch):
+    """Whatever the caller's BLAS thread count, the pipeline's products and eigensolves
+    run on one thread (their sums, and the maps, then do not depend on the machine's
+    cores: tests/test_laplacian.py), and the caller's count is back afterwards, on an
+    error too."""
+    module = {"detect": self_matching, "match": two_shapes}[entry]
+    seen = []
+
+    def solve(*args, **kwargs):
+        seen.append(_blas_threads())
+        raise _Stop
+
+    monkeypatch.setattr(module, "solve", solve)
+    figure = shapes.figure(4)
+    run = {"detect": lambda: intrinsym.detect(figure), "match": lambda: intrinsym.match(figure, figure)}[entry]
+    with threadpool_limits(2, user_api="blas"):
+        with pytest.raises(_Stop):
+            run()
+        assert _blas_threads() == {2}
+    assert seen == [{1}]

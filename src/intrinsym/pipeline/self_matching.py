@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from .._threads import one_blas_thread
 from ..extract.extract import mapped_symmetry
 from ..globalmap.self_hypothesis import TRIVIAL_SHARE, fixed_share, self_symmetry_map
 from ..params import Params
@@ -64,6 +65,7 @@ def prepare(
     return prepare_surface(as_shape(shape), min_vertices(p))
 
 
+@one_blas_thread
 def detect(
     shape: ShapeLike | Surface,
     params: Params | None = None,

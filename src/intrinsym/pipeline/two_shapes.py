@@ -8,6 +8,7 @@ import dataclasses
 
 import numpy as np
 
+from .._threads import one_blas_thread
 from ..errors import ParameterError
 from ..globalmap.part_chain import part_vertex_map
 from ..globalmap.part_map import choose_part_map
@@ -25,6 +26,7 @@ from .inputs import check_machine, resolve_params, sample_pair, working_surface
 from .stages import Clock, run_bp, solve
 
 
+@one_blas_thread
 def match(
     a: ShapeLike | Surface,
     b: ShapeLike | Surface,

@@ -26,6 +26,8 @@ from scipy.sparse.linalg import LinearOperator, eigsh
 from scipy.spatial import cKDTree
 from threadpoolctl import threadpool_limits
 
+from .._threads import one_blas_thread
+
 __all__ = [
     "COARSE_EXTRA",
     "COARSE_PER_PAIR",
@@ -137,6 +139,7 @@ def _check_k(n: int, k: int) -> None:
         raise ValueError(f"k must lie in [2, {n - 1}] for {n} points; got {k}")
 
 
+@one_blas_thread
 def eigenpairs(
     vertices: np.ndarray, faces: np.ndarray | None, k: int, coarse: int = 0
 ) -> tuple[np.ndarray, np.ndarray]:
