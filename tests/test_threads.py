@@ -15,6 +15,7 @@ import intrinsym
 from conftest import sphere_points, unit_sphere
 from intrinsym import _threads
 from intrinsym.geodesics import geodesics
+from intrinsym.globalmap.part_trilateration import best_images
 from intrinsym.globalmap.refine import spectral_descent
 from intrinsym.mesh import generated as shapes
 from intrinsym.mrf.bp import belief_propagation
@@ -64,9 +65,9 @@ def _on_threads(n: int, fn):
 
 @pytest.mark.skipif(min(nb.config.NUMBA_NUM_THREADS, os.cpu_count() or 1) < 2, reason="needs two cores")
 def test_kernels_give_the_same_result_on_one_thread_and_on_two():
-    """The descriptor kernels, the BP sweep, the nearest-row search, the descent and the
-    chord pruning of the geodesic graph split their rows over the threads; each row is
-    computed alone, so the results agree bit for bit."""
+    """The descriptor kernels, the BP sweep, the nearest-row search, the descent, the
+    chord pruning of the geodesic graph and the trilateration's search split their rows
+    over the threads; each row is computed alone, so the results agree bit for bit."""
     cloud = sphere_points(3000, seed=1)
     points = cloud[:200]
     rng = np.random.default_rng(0)
@@ -76,13 +77,16 @@ def test_kernels_give_the_same_result_on_one_thread_and_on_two():
     graph = geodesics.surface_graph(vertices, faces)
     evecs = eigenpairs(vertices, faces, 20)[1]
     start = rng.permutation(len(vertices))
+    on_part, on_whole = rng.random((12, 300)), rng.random((12, 400))
 
     def run():
         images = quantize(spin_images(points, points, cloud, 0.3, 8))
         marginals = belief_propagation(mrf, schedule="colour", iterations=4, tol=0.0, dtype=np.float32).marginals
         descent = spectral_descent(graph, np.arange(len(vertices)), start, evecs)
         chords = geodesics.surface_graph(vertices, faces)
-        return images, nmi(images, images), nearest_rows(query, basis), marginals, descent, chords.indices, chords.data
+        located = best_images(on_part, on_whole, 0.5, np.full(300, -1))
+        nearest = nearest_rows(query, basis)
+        return images, nmi(images, images), nearest, marginals, descent, chords.indices, chords.data, located
 
     one, two = _on_threads(1, run), _on_threads(2, run)
     for a, b in zip(one, two, strict=True):

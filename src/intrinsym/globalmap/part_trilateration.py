@@ -21,6 +21,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .._threads import map_ranges
 from ..geodesics.geodesics import distances_from
 from ..mesh.sampling import farthest_point_sampling
 from ..surface import Surface, input_map, working_map
@@ -97,27 +98,13 @@ def anchor_core(part_distances: np.ndarray, whole_distances: np.ndarray, reach: 
     return core
 
 
-@nb.njit(parallel=True, cache=True)
-def best_images(part_distances, whole_distances, reach, start):  # pragma: no cover
-    """(A, N_part), (A, N_whole) float, float, (N_part,) int -> (N_part,) int.
-
-    Per part vertex, the whole's vertex whose distances to the anchors' images best
-    repeat (least sum of absolute differences) the vertex's distances to the anchors
-    within ``reach``; ``start`` (-1: none) where fewer than MIN_ANCHORS are. Ties go to
-    ``start``, then to the lowest vertex: the dense argmin's answer. The start's own sum
-    bounds the search from the outset. The whole's vertices are costed ``_BLOCK`` at a
-    time, one anchor after another (nearest first), each term reading one contiguous
-    stretch of a row, until every sum in the block reaches the best so far; a block
-    that ends below it is then scanned in vertex order. The sums are those of the dense
-    search, term for term. (Per vertex, stopping each sum once it reaches the best, took
-    2.0-2.1x as long on holes_cat_shape_6's and cuts_dog_shape_5's searches, the same images:
-    about half the whole survives the first term, and the loop does not vectorise.
-    Visiting the whole's vertices in the order of the first term's difference took
-    0.66-1.26x as long as that on holes_dog_shape_9's four searches.)"""
-    n_anchors, n_part = part_distances.shape
+@nb.njit(cache=True, nogil=True)
+def _best_images(lo, hi, part_distances, whole_distances, reach, start, out):  # pragma: no cover
+    """Part vertices ``lo:hi`` of :func:`best_images`, into ``out``."""
+    n_anchors = part_distances.shape[0]
     n_whole = whole_distances.shape[1]
-    out = start.copy()
-    for x in nb.prange(n_part):
+    total = np.empty(_BLOCK)
+    for x in range(lo, hi):
         column = part_distances[:, x]
         order = np.argsort(column)
         m = 0
@@ -132,9 +119,8 @@ def best_images(part_distances, whole_distances, reach, start):  # pragma: no co
             best = 0.0
             for j in range(m):
                 best += abs(whole_distances[order[j], arg] - wanted[j])
-        total = np.empty(_BLOCK)
-        for lo in range(0, n_whole, _BLOCK):
-            size = min(_BLOCK, n_whole - lo)
+        for lo_w in range(0, n_whole, _BLOCK):
+            size = min(_BLOCK, n_whole - lo_w)
             for k in range(size):
                 total[k] = 0.0
             low = 0.0
@@ -143,7 +129,7 @@ def best_images(part_distances, whole_distances, reach, start):  # pragma: no co
                 row = whole_distances[order[j]]
                 low = np.inf
                 for k in range(size):
-                    total[k] += abs(row[lo + k] - wanted[j])
+                    total[k] += abs(row[lo_w + k] - wanted[j])
                     low = min(low, total[k])
                 j += 1
             if low >= best:
@@ -151,8 +137,47 @@ def best_images(part_distances, whole_distances, reach, start):  # pragma: no co
             for k in range(size):
                 if total[k] < best:
                     best = total[k]
-                    arg = lo + k
+                    arg = lo_w + k
         out[x] = arg
+
+
+def best_images(part_distances: np.ndarray, whole_distances: np.ndarray, reach: float, start: np.ndarray) -> np.ndarray:
+    """Per part vertex, the whole's vertex whose distances to the anchors' images best
+    repeat (least sum of absolute differences) the vertex's distances to the anchors
+    within ``reach``.
+
+    The start's own sum bounds the search from the outset. The whole's vertices are
+    costed ``_BLOCK`` at a time, one anchor after another (nearest first), each term
+    reading one contiguous stretch of a row, until every sum in the block reaches the
+    best so far; a block that ends below it is then scanned in vertex order. The sums
+    are those of the dense search, term for term. (Per vertex, stopping each sum once it
+    reaches the best, took 2.0-2.1x as long on holes_cat_shape_6's and
+    cuts_dog_shape_5's searches, the same images: about half the whole survives the
+    first term, and the loop does not vectorise. Visiting the whole's vertices in the
+    order of the first term's difference took 0.66-1.26x as long as that on
+    holes_dog_shape_9's four searches.) The part's vertices are searched on
+    :func:`intrinsym._threads.map_ranges`' threads, not in a ``prange`` loop, whose
+    compilation cost 4.4 s on the first run after install.
+
+    Parameters
+    ----------
+    part_distances : (A, N_part) float
+        Geodesic distances from the anchors on the part (``inf`` beyond ``reach``).
+    whole_distances : (A, N_whole) float
+        From the anchors' images on the whole.
+    reach : float
+        Anchors at least this far from a vertex are not used.
+    start : (N_part,) int
+        Each vertex's current image (-1: none); it stays where fewer than
+        :data:`MIN_ANCHORS` anchors are within reach.
+
+    Returns
+    -------
+    (N_part,) int
+        Ties go to ``start``, then to the lowest vertex: the dense argmin's answer.
+    """
+    out = start.copy()
+    map_ranges(_best_images, part_distances.shape[1], part_distances, whole_distances, reach, start, out)
     return out
 
 
