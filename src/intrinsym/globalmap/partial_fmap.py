@@ -33,8 +33,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import minimize
 from scipy.sparse.linalg import LinearOperator, cg
-from threadpoolctl import threadpool_limits
 
+from .._threads import one_blas_thread
 from ..spectral.neighbours import nearest_rows
 
 __all__ = ["PartialMap", "gradient_operator", "partial_functional_map", "restricted_zoomout"]
@@ -295,6 +295,9 @@ def restricted_zoomout(
     return images
 
 
+# (N, 60) products a few hundred times: OpenBLAS's threads made them 2.9x slower
+# (13.5 s against 4.7 s on a SHREC'16 pair, the 2-core Xeon VM)
+@one_blas_thread
 def partial_functional_map(
     part: tuple[np.ndarray, np.ndarray, np.ndarray],
     whole: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
@@ -318,17 +321,6 @@ def partial_functional_map(
     -------
     PartialMap
     """
-    # (N, 60) products a few hundred times: OpenBLAS's threads made them 2.9x slower
-    # (13.5 s against 4.7 s on a SHREC'16 pair, the 2-core Xeon VM)
-    with threadpool_limits(1, user_api="blas"):
-        return _partial_functional_map(part, whole, descriptors)
-
-
-def _partial_functional_map(
-    part: tuple[np.ndarray, np.ndarray, np.ndarray],
-    whole: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    descriptors: tuple[np.ndarray, np.ndarray],
-) -> PartialMap:
     evals_p, evecs_p, mass_p = part
     evals_w, evecs_w, mass_w, vertices, faces = whole
     grad, face_areas = gradient_operator(vertices, faces)
