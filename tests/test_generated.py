@@ -17,7 +17,7 @@ import pytest
 import intrinsym
 from intrinsym.evaluation import evaluate, partial_truth
 from intrinsym.extract import extract
-from intrinsym.globalmap import confidence, vertex_maps
+from intrinsym.globalmap import confidence, self_hypothesis, vertex_maps
 from intrinsym.globalmap.vertex_maps import fitted_vertex_map
 from intrinsym.mesh import generated as shapes
 from intrinsym.mesh.shape import Shape, surface_area
@@ -208,3 +208,31 @@ def test_the_partial_shapes_limbs_map_onto_each_other_and_its_body_has_no_partne
     mapped = result.symmetry_map() >= 0
     own = confidence.calibrated(result.symmetry_score(), table=confidence.PARTIAL_CALIBRATION)
     assert np.allclose(conf[mapped], own[mapped], atol=1e-6) and not conf[~mapped].any()
+
+
+@pytest.mark.slow  # a detect at 150 / 1500, the size of the test above (CI: -m slow)
+def test_the_partial_shape_with_a_limb_cut_away_has_no_partner_anywhere():
+    """The generated partial shape with limb 2 cut away (its vertices and every triangle
+    touching them removed, leaving a stump's boundary): the limb swap, its only
+    symmetry, lost its other half, so no vertex has a partner and the symmetry map must
+    be -1 everywhere. Measured at this size, seeds 0 and 1: no global symmetry, and the
+    self hypothesis, a slide of the body mapping 0.76-0.94 of the vertices, does not
+    count (median likeness rank 0.31-0.39 against ``SELF_LIKENESS`` 0.15; 0.36-0.41 on
+    the coarser 3,741-vertex shape, ``partial(8)``, at 60 / 600 and 100 / 1000, seeds 0-2)."""
+    g = shapes.partial()
+    keep = np.asarray(g.labels) != 2
+    kept = g.faces[keep[g.faces].all(axis=1)]
+    used = np.unique(kept)
+    new = np.full(len(g.vertices), -1)
+    new[used] = np.arange(len(used))
+    cut = Shape(g.vertices[used], new[kept])
+    edges = np.sort(cut.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    assert (np.unique(edges, axis=0, return_counts=True)[1] == 1).any()  # the stump is open
+    result = intrinsym.detect(cut, intrinsym.make_params(n_source=150, n_target=1500))
+    assert result.global_symmetry is None
+    assert result.info.self_map is not None and result.info.self_map.source == "none"
+    assert result.info.self_map.likeness["hypothesis 1"] > self_hypothesis.SELF_LIKENESS
+    unit = np.sqrt(surface_area(cut))
+    truth = partial_truth.PartialTruth(np.full(len(used), partial_truth.NO_PARTNER), np.full(len(used), np.inf), unit)
+    scores = partial_truth.score_partial(result.symmetry_map(), cut, truth)
+    assert scores.unpartnered_unmapped == 1.0 and scores.n_partnered == 0, scores

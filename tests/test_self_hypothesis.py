@@ -1,7 +1,8 @@
 """A shape's partial symmetry map from its own descriptor matches
 (globalmap/self_hypothesis.py): the residual of exact symmetries and of a map broken on
 one arm, the cut by hand, the likeness ranks of the identity, of a symmetry and of a
-random map, which maps count, and a SHREC'16 dog with holes, saved and summarised (slow)."""
+random map, which maps count, and a SHREC'16 dog with holes, saved and summarised (slow);
+spot with a leg cut away, the symmetry of what is there (slow, a strict xfail)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ from intrinsym.evaluation import partial_truth
 from intrinsym.extract import part_mask
 from intrinsym.globalmap import part_hypothesis, part_map, self_hypothesis
 from intrinsym.mesh import generated as shapes
-from intrinsym.mesh.shape import from_arrays
+from intrinsym.mesh.shape import from_arrays, surface_area
 from intrinsym.params import Params
 from intrinsym.pipeline import self_matching
 from intrinsym.surface import prepare
@@ -225,3 +226,32 @@ def test_a_global_map_that_stays_put_on_a_shape_with_holes_gives_way_to_its_symm
     assert result.global_symmetry is None and result.extraction.symmetries[0].kind == "self map"
     scores = partial_truth.score_partial(result.symmetry_map(), shape, truth)
     assert scores.partnered_within_010 >= 0.85 and scores.unpartnered_unmapped >= 0.9, scores
+
+
+@pytest.mark.slow  # a detect of the shipped spot at 150 / 1500 (CI: -m slow)
+@pytest.mark.xfail(
+    strict=True, raises=AssertionError, reason="the unary's WKS vetoes the partner with a leg cut: BP loses that end"
+)
+def test_spot_with_a_leg_cut_away_keeps_the_symmetry_of_what_is_there() -> None:
+    """The shipped spot (mirror-symmetric in x to the vertex) with one leg cut away (the
+    +x one at the +z end): the left/right symmetry of the rest, at the issue's targets
+    (partnered within 0.10 on 0.90, unpartnered left unmapped on 0.85). Measured, seed 0:
+    0.497 and 0.151 at this size, 0.516 and 0.783 at 250 / 4000; BP's argmax is right on
+    every partnered sample at the far end (z <= -0.3) and on none at the cut leg's end
+    (z > 0.2), while the complete spot's map is exact. The spin image alone with each row's own
+    widths (``unary="spin", calibration="row"``) gets 0.94 within 0.05 here but loses the
+    global map of posed complete shapes (docs/limitations.md, Incomplete shapes)."""
+    whole = intrinsym.load(intrinsym.example_path())
+    v, f = whole.vertices, whole.faces
+    drop = (v[:, 0] > 0.05) & (v[:, 1] < -0.35) & (v[:, 2] > 0.2)
+    kept = f[(~drop)[f].all(axis=1)]
+    used = np.unique(kept)
+    new = np.full(len(v), -1)
+    new[used] = np.arange(len(used))
+    shape = from_arrays(v[used], new[kept])
+    unit = np.sqrt(surface_area(whole))
+    truth = partial_truth.partner_truth(shape.vertices, shape.vertices * [-1.0, 1.0, 1.0], unit)
+    assert 0.03 <= truth.unpartnered.mean() <= 0.05 and truth.partnered.mean() >= 0.9  # one leg's worth
+    result = intrinsym.detect(shape, intrinsym.make_params(n_source=150, n_target=1500))
+    scores = partial_truth.score_partial(result.symmetry_map(), shape, truth)
+    assert scores.partnered_within_010 >= 0.9 and scores.unpartnered_unmapped >= 0.85, scores
