@@ -51,22 +51,23 @@ def shared(relative: str) -> Path:
 BUDGET_S = 90.0
 
 
-#: Test modules that share a fixture of seconds (a detect, a browser) computed once per
-#: process: the scheduler below gives the modules of one group to one worker, which computes
-#: it once (plain ``load`` scheduling computed it on each worker that drew one of their
-#: tests). ``example_detected`` and ``browser`` are session fixtures of two modules each; the
-#: others hold module fixtures (``spot_result`` and ``spot_again``, ``star`` and ``figure``,
-#: ``mirror_results``, ``star``, ``half_matched``).
+#: Test modules that share a fixture of seconds (a detect, a match, a browser) computed once
+#: per process: the scheduler below gives the modules of one group to one worker, which
+#: computes it once (plain ``load`` scheduling computed it on each worker that drew one of
+#: their tests). ``example_detected``, ``browser`` and ``turned_figure_match`` are session
+#: fixtures of two modules each (the last two's modules one group); the others hold module
+#: fixtures (``spot_result`` and ``spot_again``, ``star`` and ``figure``, ``mirror_results``,
+#: ``star``, ``half_matched``).
 SHARED_FIXTURE_GROUPS = {
     "test_cli.py": "example_detected",
     "test_reliability.py": "example_detected",
-    "test_viewer.py": "browser",
-    "test_export.py": "browser",
+    "test_viewer.py": "browser, turned_figure_match",
+    "test_export.py": "browser, turned_figure_match",
+    "test_match_modes.py": "browser, turned_figure_match",
     "test_pipeline.py": "test_pipeline.py",
     "test_generated.py": "test_generated.py",
     "test_unary.py": "test_unary.py",
     "test_symmetry_group.py": "test_symmetry_group.py",
-    "test_match_modes.py": "test_match_modes.py",
 }
 
 
@@ -238,6 +239,23 @@ def example_detected(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, st
     p = subprocess.run(argv, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     return out, p.stdout
+
+
+@pytest.fixture(scope="session")
+def turned_figure_match():
+    """The posed figure (434 vertices) matched to itself turned by 90 degrees about z, at
+    50 / 500, given the turned copy's own mirror map (``target_symmetry``): the figure A,
+    the turned copy B, the mirror map and the result. Computed once per session for the
+    tests of the match's two answers (test_match_modes.py) and of the viewer's page of
+    such a match (test_viewer.py), which read it and write nothing into it."""
+    import intrinsym
+
+    figure = shapes.figure(6)
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
+    mirror = figure.symmetries[0]
+    result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500), target_symmetry=mirror)
+    return a, b, mirror, result
 
 
 def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:

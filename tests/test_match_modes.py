@@ -332,14 +332,12 @@ def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
 
 
 @pytest.fixture(scope="module")
-def turned_pair() -> tuple[intrinsym.Shape, np.ndarray, intrinsym.Result]:
-    """The figure matched to itself turned by 90 degrees, given the turned copy's own
-    mirror map: the figure, the mirror and the result, shared by the two tests below."""
-    figure = shapes.figure(6)
-    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
-    mirror = figure.symmetries[0]
-    return a, mirror, intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500), target_symmetry=mirror)
+def turned_pair(turned_figure_match) -> tuple[intrinsym.Shape, np.ndarray, intrinsym.Result]:
+    """The figure matched to itself turned by 90 degrees at 50 / 500, given the turned
+    copy's own mirror map: the figure, the mirror and the result, shared by the two tests
+    below (and test_viewer.py's page of the match: conftest's ``turned_figure_match``)."""
+    a, _, mirror, result = turned_figure_match
+    return a, mirror, result
 
 
 def _near(a: intrinsym.Shape, vmap: np.ndarray, answer: np.ndarray) -> np.ndarray:
