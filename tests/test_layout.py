@@ -6,6 +6,7 @@ How long a module may be is a review question (as long as its concept needs), no
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -26,9 +27,10 @@ def _module(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
+@functools.cache
 def _imports() -> dict[str, set[str]]:
     """Module -> the package modules it imports at module level (not under TYPE_CHECKING
-    or inside functions)."""
+    or inside functions). Parsed once per process for the tests below, which only read it."""
     modules = {_module(p): p for p in SRC.rglob("*.py")}
     graph: dict[str, set[str]] = {}
     for name, path in modules.items():
