@@ -138,6 +138,7 @@ def test_spectral_symmetry_checks_sizes(mirror):
         spectral.spectral_symmetry(v, f, n_samples=20, n_final=30)
 
 
+@pytest.mark.slow  # a real scan at the defaults (CI: -m slow); a posed shape by default: test_..._on_the_posed_figure
 def test_spectral_symmetry_on_tosca_wolf():
     path = shared("tosca_sym/wolf0.off")
     shape = load(path)
