@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 # One OpenBLAS thread for the run and the processes it starts (before NumPy and SciPy
 # load the library, which reads it once): on two cores its threads spin against each
@@ -18,20 +19,27 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import pytest
-import trimesh
-from hypothesis import settings
-from scipy.spatial import cKDTree
 
-from intrinsym.evaluation import evaluate
-from intrinsym.geodesics import geodesics
-from intrinsym.mesh import generated as shapes
-from intrinsym.mesh.shape import from_arrays, surface_area
+# The rest (trimesh, SciPy, Hypothesis, the package) is imported where it is used: the
+# pytest-xdist controller imports this file too, before it starts the workers, and runs
+# no test (the imports took it 1.1 s).
+if TYPE_CHECKING:
+    from intrinsym.mesh import generated as shapes
 
-# Property tests draw the same examples on every run (a test that fails, fails again
-# on a fresh clone); HYPOTHESIS_PROFILE=explore draws new ones, to look for new failures.
-settings.register_profile("reproducible", derandomize=True, database=None)
-settings.register_profile("explore", derandomize=False)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Property tests draw the same examples on every run (a test that fails, fails again
+    on a fresh clone); HYPOTHESIS_PROFILE=explore draws new ones, to look for new failures.
+    Loaded in each process that runs tests (not in the pytest-xdist controller), before
+    the test modules are collected."""
+    if getattr(config, "workerinput", None) is None and config.getoption("numprocesses", None):
+        return
+    from hypothesis import settings
+
+    settings.register_profile("reproducible", derandomize=True, database=None)
+    settings.register_profile("explore", derandomize=False)
+    settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
+
 
 #: The research data folder: $INTRINSYM_DATA, else the development checkout's default beside the repository.
 DATA = Path(os.environ.get("INTRINSYM_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data")
@@ -51,22 +59,23 @@ def shared(relative: str) -> Path:
 BUDGET_S = 90.0
 
 
-#: Test modules that share a fixture of seconds (a detect, a browser) computed once per
-#: process: the scheduler below gives the modules of one group to one worker, which computes
-#: it once (plain ``load`` scheduling computed it on each worker that drew one of their
-#: tests). ``example_detected`` and ``browser`` are session fixtures of two modules each; the
-#: others hold module fixtures (``spot_result`` and ``spot_again``, ``star`` and ``figure``,
-#: ``mirror_results``, ``star``, ``half_matched``).
+#: Test modules that share a fixture of seconds (a detect, a match, a browser) computed once
+#: per process: the scheduler below gives the modules of one group to one worker, which
+#: computes it once (plain ``load`` scheduling computed it on each worker that drew one of
+#: their tests). ``example_detected``, ``browser`` and ``turned_figure_match`` are session
+#: fixtures of two modules each (the last two's modules one group); the others hold module
+#: fixtures (``spot_result`` and ``spot_again``, ``star`` and ``figure``, ``mirror_results``,
+#: ``star``, ``half_matched``).
 SHARED_FIXTURE_GROUPS = {
     "test_cli.py": "example_detected",
     "test_reliability.py": "example_detected",
-    "test_viewer.py": "browser",
-    "test_export.py": "browser",
+    "test_viewer.py": "browser, turned_figure_match",
+    "test_export.py": "browser, turned_figure_match",
+    "test_match_modes.py": "browser, turned_figure_match",
     "test_pipeline.py": "test_pipeline.py",
     "test_generated.py": "test_generated.py",
     "test_unary.py": "test_unary.py",
     "test_symmetry_group.py": "test_symmetry_group.py",
-    "test_match_modes.py": "test_match_modes.py",
 }
 
 
@@ -149,6 +158,8 @@ def sphere_points(n: int, seed: int = 0, radius: float = 1.0) -> np.ndarray:
 
 def unit_sphere(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of an icosphere of unit area."""
+    import trimesh
+
     s = trimesh.creation.icosphere(subdivisions=subdivisions)
     return np.asarray(s.vertices) / np.sqrt(4 * np.pi), np.asarray(s.faces)
 
@@ -160,6 +171,9 @@ def mirror_shape(subdivisions: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndar
 
     Returns vertices (N,3), faces (F,3) and sym (N,) with vertex sym[i] the mirror of i.
     """
+    import trimesh
+    from scipy.spatial import cKDTree
+
     sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
     v = sphere.vertices * [0.6, 1.5, 0.5]
     v[:, 2] += 0.35 * v[:, 1] ** 2 + 0.25 * v[:, 1]
@@ -240,6 +254,25 @@ def example_detected(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, st
     return out, p.stdout
 
 
+@pytest.fixture(scope="session")
+def turned_figure_match():
+    """The posed figure (434 vertices) matched to itself turned by 90 degrees about z, at
+    50 / 500, given the turned copy's own mirror map (``target_symmetry``): the figure A,
+    the turned copy B, the mirror map and the result. Computed once per session for the
+    tests of the match's two answers (test_match_modes.py) and of the viewer's page of
+    such a match (test_viewer.py), which read it and write nothing into it."""
+    import intrinsym
+    from intrinsym.mesh import generated as shapes
+    from intrinsym.mesh.shape import from_arrays
+
+    figure = shapes.figure(6)
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
+    mirror = figure.symmetries[0]
+    result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500), target_symmetry=mirror)
+    return a, b, mirror, result
+
+
 def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
     """A saved self-matching result on a unit icosphere whose marginals are known.
 
@@ -249,6 +282,9 @@ def sphere_result(folder: Path) -> tuple[Path, np.ndarray]:
 
     Returns the result directory and the (V, 3) vertices.
     """
+    import trimesh
+    from scipy.spatial import cKDTree
+
     from intrinsym import Params, Result
     from intrinsym.result.runinfo import BPStats, Resolved, RunInfo, Sizes
 
@@ -294,6 +330,8 @@ def unit_square_grid(n=24):
 def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
     """The posed figure (434 vertices) and the vertices of it above y = -1 (one limb's
     end cut away, 361 vertices)."""
+    from intrinsym.mesh import generated as shapes
+
     figure = shapes.figure(6)
     keep = figure.vertices[:, 1] > -1.0
     return figure, np.flatnonzero(keep)
@@ -301,6 +339,8 @@ def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
 
 def part_of(figure: shapes.GeneratedShape, used: np.ndarray):
     """The figure's mesh restricted to ``used`` (faces with all three corners in it)."""
+    from intrinsym.mesh.shape import from_arrays
+
     keep = np.zeros(len(figure.vertices), dtype=bool)
     keep[used] = True
     faces = figure.faces[keep[figure.faces].all(axis=1)]
@@ -312,6 +352,10 @@ def part_of(figure: shapes.GeneratedShape, used: np.ndarray):
 def right_share(figure: shapes.GeneratedShape, used: np.ndarray, images: np.ndarray) -> float:
     """Share of the part's vertices whose image lies within 0.10 sqrt(area) of their own
     vertex of the figure or of its image under one of the figure's symmetries."""
+    from intrinsym.evaluation import evaluate
+    from intrinsym.geodesics import geodesics
+    from intrinsym.mesh.shape import from_arrays, surface_area
+
     unit = np.sqrt(surface_area(from_arrays(figure.vertices, figure.faces)))
     graph = geodesics.surface_graph(figure.vertices / unit, figure.faces)
     truths = [used, *(np.asarray(s)[used] for s in figure.symmetries)]

@@ -239,8 +239,13 @@ def test_load_confidence(tmp_path):
         assert name in str(err.value)
 
 
-def test_evaluation_report_scores_the_confidence_on_the_vertices_with_a_true_image(mirror):
-    v, f, sym = mirror
+def test_evaluation_report_scores_the_confidence_on_the_vertices_with_a_true_image():
+    # the bent ellipsoid at 642 vertices: the report solves the map's distortion and errors
+    # twice, 1.5 s on the fixture's 2,562; here the identity's share within 0.05 on the
+    # plane side is 0.18, not 0.150 (next to its confidence 0.15: an error near 0)
+    from conftest import mirror_shape
+
+    v, f, sym = mirror_shape(subdivisions=3)
     shape = from_arrays(v, f)
     # the true map on the vertices x > 0 and the identity elsewhere (right only on the
     # mirror plane); a vertex without a true image is not scored

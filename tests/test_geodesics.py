@@ -131,13 +131,21 @@ def reference_surface_graph(v: np.ndarray, f: np.ndarray, rings: int, tol: float
     for u, w in base:
         cand[u].add(w)
         cand[w].add(u)
+    norms: dict[tuple[int, int], float] = {}
+
+    def dist(a: int, b: int) -> float:
+        """``np.linalg.norm(v[a] - v[b])``, each pair's computed once (the pairs recur)."""
+        if (a, b) not in norms:
+            norms[a, b] = np.linalg.norm(v[a] - v[b])
+        return norms[a, b]
+
     rows, cols = [], []
     for u in range(n):
         for w in sorted(cand[u]):
             if (min(u, w), max(u, w)) not in base:
-                bound = (1 + tol) * np.linalg.norm(v[u] - v[w])
+                bound = (1 + tol) * dist(u, w)
                 common = (cand[u] & cand[w]) - {u, w}
-                if any(np.linalg.norm(v[u] - v[x]) + np.linalg.norm(v[x] - v[w]) <= bound for x in common):
+                if any(dist(u, x) + dist(x, w) <= bound for x in common):
                     continue
             rows.append(u)
             cols.append(w)

@@ -36,7 +36,11 @@ def _cut(vertices: np.ndarray, faces: np.ndarray, z: float) -> tuple[intrinsym.S
 
 @pytest.fixture(scope="module")
 def half_and_whole() -> tuple[intrinsym.Shape, intrinsym.Shape, np.ndarray]:
-    whole = shapes.partial(6)
+    """The generated blob at its coarsest (930 vertices) and its half above z = -0.1 (494
+    vertices): the part's chain runs on the meshes as given, and at resolution 6 (2,162
+    vertices) took 6 of the module's match's 7 s; both take the same steps (partial
+    functional map, refined, trilaterated and polished; no hypothesis, no blend)."""
+    whole = shapes.partial(4)
     half, used = _cut(whole.vertices, whole.faces, -0.1)
     return half, from_arrays(whole.vertices, whole.faces), used
 
@@ -195,10 +199,11 @@ def test_a_whole_matched_to_its_part_takes_the_parts_own_match_inverted(half_and
     """match(whole, part)'s vertex map is the part's own match to the whole inverted
     (:func:`invert_part_match`), -1 off what it covers, and a loaded result keeps it; its
     own labels on the part lie as densely as the part's match's on the whole. At
-    this size the part's own map is mostly wrong (0.23 of the half within 0.1 of its true
-    image at seed 0), so what the inverse leaves unmatched is measured at 150 / 1500 on
-    spot, in the slow test below; :func:`inverse_vertex_map` itself is tested on exact maps
-    in test_vertex_maps.py."""
+    this size the part's own map was mostly wrong when this test was written (0.23 of
+    the half within 0.1 of its true image at seed 0; since the part's chain, 1.000 at
+    seed 0, at resolution 4 as at 6), so what the inverse leaves unmatched is measured
+    at 150 / 1500 on spot, in the slow test below; :func:`inverse_vertex_map` itself is
+    tested on exact maps in test_vertex_maps.py."""
     half, whole, _ = half_and_whole
     result = intrinsym.match(whole, half, intrinsym.make_params(**SMALL))
     assert result.info.part and result.info.target_part and "reverse match" in result.info.seconds
@@ -332,14 +337,12 @@ def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
 
 
 @pytest.fixture(scope="module")
-def turned_pair() -> tuple[intrinsym.Shape, np.ndarray, intrinsym.Result]:
-    """The figure matched to itself turned by 90 degrees, given the turned copy's own
-    mirror map: the figure, the mirror and the result, shared by the two tests below."""
-    figure = shapes.figure(6)
-    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
-    mirror = figure.symmetries[0]
-    return a, mirror, intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500), target_symmetry=mirror)
+def turned_pair(turned_figure_match) -> tuple[intrinsym.Shape, np.ndarray, intrinsym.Result]:
+    """The figure matched to itself turned by 90 degrees at 50 / 500, given the turned
+    copy's own mirror map: the figure, the mirror and the result, shared by the two tests
+    below (and test_viewer.py's page of the match: conftest's ``turned_figure_match``)."""
+    a, _, mirror, result = turned_figure_match
+    return a, mirror, result
 
 
 def _near(a: intrinsym.Shape, vmap: np.ndarray, answer: np.ndarray) -> np.ndarray:

@@ -26,6 +26,10 @@ from intrinsym.spectral import laplacian
 from intrinsym.surface import serves
 
 SMALL = dict(n_source=40, n_target=400, spin_cloud=6000, iterations=20)
+#: The detects of the tests that read the samples, the unary, BP and the identity decision
+#: leave out ZoomOut's global map, which runs after them: those are the same bit for bit
+#: (measured on each such detect), and a detect of spot at SMALL takes 0.3 of its 1 s less.
+NO_ZOOMOUT = dict(zoomout=False)
 
 
 @pytest.fixture(scope="module")
@@ -267,7 +271,7 @@ def spot_surface(spot_again):
 def test_deterministic_for_a_seed(spot_surface, spot_result, spot_again):
     _, again = spot_again
     assert np.array_equal(again.marginals, spot_result.marginals)
-    other = intrinsym.detect(spot_surface, intrinsym.make_params(seed=1, **SMALL))
+    other = intrinsym.detect(spot_surface, intrinsym.make_params(seed=1, **SMALL, **NO_ZOOMOUT))
     assert not np.array_equal(other.source_point_vertex, spot_result.source_point_vertex)
 
 
@@ -353,8 +357,9 @@ def test_a_refined_prepared_surface_detects_as_its_shape(monkeypatch):
 
 
 def test_residual_schedule_end_to_end(spot_surface, spot_result):
-    res = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="residual", **dict(SMALL, iterations=100)))
-    colour = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="colour", **dict(SMALL, iterations=100)))
+    sizes = dict(SMALL, iterations=100, **NO_ZOOMOUT)
+    res = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="residual", **sizes))
+    colour = intrinsym.detect(spot_surface, intrinsym.make_params(schedule="colour", **sizes))
     assert (res.info.bp.schedule, colour.info.bp.schedule) == ("residual", "colour")
     # the default: the residual schedule on the CPU, the colour schedule on a GPU
     assert spot_result.info.bp.schedule == bp.resolve_schedule("auto", spot_result.info.bp.backend)
@@ -380,7 +385,7 @@ def test_bp_stopped_at_the_default_tolerance_holds_the_fixed_points_answer(spot_
 
 def test_scale_free(spot, spot_result):
     big = Shape(spot.vertices * 1000.0 + 5.0, spot.faces)
-    r = intrinsym.detect(big, intrinsym.make_params(**SMALL))
+    r = intrinsym.detect(big, intrinsym.make_params(**SMALL, **NO_ZOOMOUT))
     assert np.array_equal(r.source_point_vertex, spot_result.source_point_vertex)
     assert np.array_equal(r.target_point_vertex, spot_result.target_point_vertex)
     assert np.abs(r.marginals - spot_result.marginals).max() < 1e-4
@@ -388,12 +393,12 @@ def test_scale_free(spot, spot_result):
 
 
 def test_trivial_match_removed_weighted_and_kept(spot, spot_surface, spot_result):
-    kept = intrinsym.detect(spot_surface, intrinsym.make_params(remove_trivial=False, **SMALL))
+    kept = intrinsym.detect(spot_surface, intrinsym.make_params(remove_trivial=False, **SMALL, **NO_ZOOMOUT))
     removed = spot_result  # the default ("auto") removes it: spot's mirror is a near-isometry
     identity = removed.info.identity
     assert identity.weight == 0.0 and identity.isometry >= identity.threshold, identity
     assert identity.reflection >= identity.reflection_threshold, identity  # its own inverse, orientation reversed
-    weighted = intrinsym.detect(spot_surface, intrinsym.make_params(trivial_weight=0.7, **SMALL))
+    weighted = intrinsym.detect(spot_surface, intrinsym.make_params(trivial_weight=0.7, **SMALL, **NO_ZOOMOUT))
     assert np.array_equal(kept.target_point_vertex, removed.target_point_vertex)
     floor = np.float32(removed.info.resolved.unary_floor)
     # Euclidean distance is a lower bound of the geodesic one: every target this close
@@ -495,7 +500,9 @@ def test_paper_preset():
 
 
 def test_point_cloud_input(spot):
-    r = intrinsym.detect((spot.vertices, None), intrinsym.make_params(n_source=30, n_target=300, iterations=5))
+    # a (vertices, None) pair: the marginals of its cloud (a cloud's global map: test_shape.py)
+    p = intrinsym.make_params(n_source=30, n_target=300, iterations=5, **NO_ZOOMOUT)
+    r = intrinsym.detect((spot.vertices, None), p)
     assert r.marginals.shape == (30, 300)
     assert np.allclose(r.marginals.sum(axis=1), 1.0, atol=1e-5)
 

@@ -11,12 +11,10 @@ import pytest
 from matplotlib.image import imread
 from scipy.spatial import cKDTree
 
-import intrinsym
 from conftest import sphere_result
 from intrinsym import Result
 from intrinsym.app import viewer, viz
-from intrinsym.mesh import generated
-from intrinsym.mesh.shape import from_arrays, surface_area
+from intrinsym.mesh.shape import surface_area
 
 
 def unpack(text, dtype):
@@ -307,18 +305,15 @@ def test_hostile_names_and_scores_do_not_blank_the_page(tmp_path, browser):
         page.close()
 
 
-def test_a_matchs_page_shows_both_answers():
-    """The figure matched to itself turned by 90 degrees (50 / 500): the page's marginal
+def test_a_matchs_page_shows_both_answers(turned_figure_match):
+    """The figure matched to itself turned by 90 degrees (50 / 500, conftest's
+    ``turned_figure_match``, also read by test_match_modes.py): the page's marginal
     of a sample is the mixture of the two modes' (:meth:`Result.mixed_marginals`), so it
     peaks near the sample's own point and near its mirror point (each within 0.1
     sqrt(area), at least a quarter of the row's top) on most samples whose two lie apart
     (measured at seeds 0 / 1 / 2: 1.000 / 0.968 / 0.938), where BP's first pass alone
     peaks at one of them (0.000 at each seed)."""
-    figure = generated.figure(6)
-    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    a, b = from_arrays(figure.vertices, figure.faces), from_arrays(figure.vertices @ turn.T, figure.faces)
-    mirror = figure.symmetries[0]
-    result = intrinsym.match(a, b, intrinsym.make_params(n_source=50, n_target=500), target_symmetry=mirror)
+    a, b, mirror, result = turned_figure_match
     data = viewer.payload(result, b, [], None)
     marg = unpack(data["marginals"], np.uint8).reshape(data["n_source"], data["n_target"])
     src, tgt, unit = result.source_point_vertex, result.target_point_vertex, np.sqrt(surface_area(a))

@@ -221,7 +221,8 @@ def test_progress_keeps_stage_lines_and_shows_bp_iterations_transiently():
 
 def test_detect_with_figures_and_no_progress_when_stderr_is_not_a_terminal(tmp_path, capsys):
     # a 320-triangle ellipsoid: the figures draw the input mesh, each panel every triangle
-    # (the example's 5,856 in 8 panels of 9 figures took most of this test's 10 s)
+    # (the example's 5,856 in 8 panels of 9 figures took most of this test's 10 s);
+    # --no-zoomout: the same figures without ZoomOut's global map, a third of the detect
     path = tmp_path / "ellipsoid.off"
     sphere = trimesh.creation.icosphere(subdivisions=2)
     trimesh.Trimesh(sphere.vertices * [1.5, 1.0, 0.6], sphere.faces, process=False).export(path)
@@ -239,6 +240,7 @@ def test_detect_with_figures_and_no_progress_when_stderr_is_not_a_terminal(tmp_p
         "3000",
         "--iterations",
         "2",
+        "--no-zoomout",
         "--figures",
     )
     assert p.returncode == 0, p.stderr
