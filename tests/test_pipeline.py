@@ -38,6 +38,13 @@ def spot():
 
 
 @pytest.fixture(scope="module")
+def spot_mirror(spot):
+    """spot's best reflection as a vertex map and its residuals (evaluate.extrinsic_mirror),
+    the independent truth of the module's tests of spot's global map."""
+    return evaluate.extrinsic_mirror(spot.vertices)
+
+
+@pytest.fixture(scope="module")
 def spot_result(spot):
     return intrinsym.detect(spot, intrinsym.make_params(**SMALL))
 
@@ -194,15 +201,15 @@ def test_a_saved_result_answers_every_question_as_the_run_did(spot_result, tmp_p
     assert old.extraction is None and old.global_symmetry is None and _same(old.marginals, r.marginals)
 
 
-def test_global_map_is_spots_reflection(spot, spot_result):
+def test_global_map_is_spots_reflection(spot, spot_result, spot_mirror):
     # independent truth: spot is mirror-symmetric, and its best reflection gives the map
-    truth, residual = evaluate.extrinsic_mirror(spot.vertices)
+    truth, residual = spot_mirror
     assert np.median(residual) < 1e-6 * np.ptp(spot.vertices)
     scores = evaluate.score_map(spot_result.symmetry_map(), spot, truth)
     assert scores.within(0.10) >= 0.9 and scores.mean_error < 0.05
 
 
-def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
+def test_global_map_judged_by_the_marginals(spot, spot_result, spot_mirror, tmp_path):
     r = spot_result
     chosen = r.info.global_map
     assert r.extraction.global_index >= 0 and chosen.source in ("extraction", "zoomout")
@@ -229,7 +236,7 @@ def test_global_map_judged_by_the_marginals(spot, spot_result, tmp_path):
     assert r.map_distortion.shape == (len(spot.vertices),) and r.map_distortion.dtype == np.float32
     assert np.array_equal(intrinsym.Result.load(out).map_distortion, r.map_distortion)
     assert np.all(np.isfinite(r.map_distortion))
-    mirror = local_distortion(evaluate.extrinsic_mirror(spot.vertices)[0], spot)
+    mirror = local_distortion(spot_mirror[0], spot)
     assert np.median(r.map_distortion) < 2 * np.median(mirror) + 0.002
     expected = confidence.calibrated(confidence.score(conf, apart, trip), r.map_distortion)
     assert np.allclose(calibrated, np.where(r.symmetry_map() >= 0, expected, 0), atol=1e-5)
