@@ -337,16 +337,26 @@ def figure_and_part() -> tuple[shapes.GeneratedShape, np.ndarray]:
     return figure, np.flatnonzero(keep)
 
 
-def part_of(figure: shapes.GeneratedShape, used: np.ndarray):
-    """The figure's mesh restricted to ``used`` (faces with all three corners in it)."""
+def cut_mesh(vertices: np.ndarray, faces: np.ndarray, keep: np.ndarray):
+    """The mesh of the triangles whose three corners ``keep`` (bool, one per vertex) holds,
+    renumbered, and the original index of each of its vertices (a kept vertex left without
+    a triangle is dropped)."""
     from intrinsym.mesh.shape import from_arrays
 
+    kept = faces[keep[faces].all(axis=1)]
+    used = np.unique(kept)
+    index = np.full(len(vertices), -1)
+    index[used] = np.arange(len(used))
+    return from_arrays(vertices[used], index[kept]), used
+
+
+def part_of(figure: shapes.GeneratedShape, used: np.ndarray):
+    """The figure's mesh restricted to ``used`` (faces with all three corners in it)."""
     keep = np.zeros(len(figure.vertices), dtype=bool)
     keep[used] = True
-    faces = figure.faces[keep[figure.faces].all(axis=1)]
-    index = np.full(len(figure.vertices), -1)
-    index[used] = np.arange(len(used))
-    return from_arrays(figure.vertices[used], index[faces])
+    part, kept = cut_mesh(figure.vertices, figure.faces, keep)
+    assert np.array_equal(kept, used), "a vertex of the part lost every triangle"
+    return part
 
 
 def right_share(figure: shapes.GeneratedShape, used: np.ndarray, images: np.ndarray) -> float:

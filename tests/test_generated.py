@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import intrinsym
+from conftest import cut_mesh
 from intrinsym.evaluation import evaluate, partial_truth
 from intrinsym.extract import extract
 from intrinsym.globalmap import confidence, self_hypothesis, vertex_maps
@@ -223,12 +224,7 @@ def test_the_partial_shape_with_a_limb_cut_away_has_no_partner_anywhere():
     count (median likeness rank 0.31-0.39 against ``SELF_LIKENESS`` 0.15; 0.36-0.41 on
     the coarser 3,741-vertex shape, ``partial(8)``, at 60 / 600 and 100 / 1000, seeds 0-2)."""
     g = shapes.partial()
-    keep = np.asarray(g.labels) != 2
-    kept = g.faces[keep[g.faces].all(axis=1)]
-    used = np.unique(kept)
-    new = np.full(len(g.vertices), -1)
-    new[used] = np.arange(len(used))
-    cut = Shape(g.vertices[used], new[kept])
+    cut, used = cut_mesh(g.vertices, g.faces, np.asarray(g.labels) != 2)
     edges = np.sort(cut.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     assert (np.unique(edges, axis=0, return_counts=True)[1] == 1).any()  # the stump is open
     result = intrinsym.detect(cut, intrinsym.make_params(n_source=150, n_target=1500))

@@ -11,6 +11,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 import intrinsym
+from conftest import cut_mesh
 from intrinsym.evaluation import evaluate
 from intrinsym.geodesics import geodesics
 from intrinsym.geodesics._dijkstra import ball_pairs, csr_arrays
@@ -24,16 +25,6 @@ from intrinsym.spectral import laplacian
 from intrinsym.surface import prepare, prepare_pair, unrefined
 
 
-def _cut(vertices: np.ndarray, faces: np.ndarray, z: float) -> tuple[intrinsym.Shape, np.ndarray]:
-    """The triangles above height ``z``, and the original index of each kept vertex."""
-    keep = vertices[:, 2] > z
-    kept = faces[keep[faces].all(axis=1)]
-    used = np.unique(kept)
-    new = np.full(len(vertices), -1)
-    new[used] = np.arange(len(used))
-    return from_arrays(vertices[used], new[kept]), used
-
-
 @pytest.fixture(scope="module")
 def half_and_whole() -> tuple[intrinsym.Shape, intrinsym.Shape, np.ndarray]:
     """The generated blob at its coarsest (930 vertices) and its half above z = -0.1 (494
@@ -41,7 +32,7 @@ def half_and_whole() -> tuple[intrinsym.Shape, intrinsym.Shape, np.ndarray]:
     vertices) took 6 of the module's match's 7 s; both take the same steps (partial
     functional map, refined, trilaterated and polished; no hypothesis, no blend)."""
     whole = shapes.partial(4)
-    half, used = _cut(whole.vertices, whole.faces, -0.1)
+    half, used = cut_mesh(whole.vertices, whole.faces, whole.vertices[:, 2] > -0.1)
     return half, from_arrays(whole.vertices, whole.faces), used
 
 
@@ -260,7 +251,7 @@ def test_half_of_spot_matches_spot_within_005():
     of its true point or of its mirror point (geodesic) on most vertices in the common
     unit; on few when the half is blown up to unit area."""
     spot = intrinsym.load(intrinsym.example_path())
-    half, used = _cut(spot.vertices, spot.faces, 0.0)
+    half, used = cut_mesh(spot.vertices, spot.faces, spot.vertices[:, 2] > 0.0)
     unit = np.sqrt(surface_area(spot))
     graph = geodesics.surface_graph(spot.vertices / unit, spot.faces)
     mirror = cKDTree(spot.vertices).query(spot.vertices[used] * [-1.0, 1.0, 1.0])[1]
@@ -299,7 +290,7 @@ def test_a_parts_marginals_hold_both_answers_given_each_mode():
     most samples whose two lie more than 0.1 apart (measured: 0.879 at ``mode_width``
     1 and 1.5, 0.848 at 0.7; the two BP passes' mean: 0.879)."""
     spot = intrinsym.load(intrinsym.example_path())
-    half, used = _cut(spot.vertices, spot.faces, 0.0)
+    half, used = cut_mesh(spot.vertices, spot.faces, spot.vertices[:, 2] > 0.0)
     graph = geodesics.surface_graph(spot.vertices / np.sqrt(surface_area(spot)), spot.faces)
     mirror = cKDTree(spot.vertices).query(spot.vertices[used] * [-1.0, 1.0, 1.0])[1]
     result = intrinsym.match(half, spot, intrinsym.make_params(n_source=40, n_target=400))
@@ -329,7 +320,7 @@ def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
     image on the kept one (above 0.05; 0.957 / 0.970 / 0.985). At 60 / 600 the half's own
     map fails and the inverse with it (cut-away unmatched 0.50-0.93, kept matched 0.17-0.33)."""
     spot = intrinsym.load(intrinsym.example_path())
-    half, _ = _cut(spot.vertices, spot.faces, 0.0)
+    half, _ = cut_mesh(spot.vertices, spot.faces, spot.vertices[:, 2] > 0.0)
     found = intrinsym.match(spot, half, intrinsym.make_params(n_source=150, n_target=1500)).symmetry_map()
     z = spot.vertices[:, 2] / np.sqrt(surface_area(spot))
     assert np.mean(found[z < -0.05] == -1) >= 0.85
