@@ -112,6 +112,21 @@ def test_calibration_by_hand():
     assert confidence.calibration(np.full(4, 0.75), np.array([True, True, True, False]))[0] == pytest.approx(0.0)
 
 
+def test_calibration_error_adds_the_gaps_of_over_and_under_confident_bins():
+    """The ECE sums each bin's absolute gap, so that an over-confident bin cannot cancel
+    an under-confident one. By hand: confidences 0.25, 0.25 both right (bin 0.2-0.3,
+    accuracy 1, gap +0.75) and 0.75, 0.75 both wrong (bin 0.7-0.8, accuracy 0, gap
+    -0.75), half of the items each: ECE = 0.5 x 0.75 + 0.5 x 0.75 = 0.75, where the
+    signed gaps sum to 0 (and the mean confidence, 0.5, is the share right)."""
+    conf = np.array([0.25, 0.25, 0.75, 0.75])
+    ece, bins = confidence.calibration(conf, np.array([True, True, False, False]))
+    assert (bins[2].accuracy, bins[7].accuracy) == (1.0, 0.0) and bins[2].share == bins[7].share == 0.5
+    assert ece == pytest.approx(0.75)
+    # the same through the report: errors within 0.05 right, beyond it (or none) wrong
+    report = confidence.calibration_report(conf, np.array([0.0, 0.05, 0.2, np.inf]))
+    assert report["expected_calibration_error"] == pytest.approx(0.75) and report["confidence"] == report["within"]
+
+
 def test_calibration_report_by_hand():
     # right: errors within 0.05 (on the edge too); an unmapped vertex (inf) never is
     report = confidence.calibration_report(np.array([0.25, 0.25, 0.9, 1.0]), np.array([0.05, 0.2, 0.0, np.inf]))
