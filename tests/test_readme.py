@@ -22,6 +22,8 @@ from intrinsym.result.runinfo import FORMAT_VERSION
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 DOCS = sorted((ROOT / "docs").glob("*.md"))
+#: The measurements behind the docs, linked from them and linking back.
+NOTES = sorted((ROOT / "docs" / "notes").glob("*.md"))
 SRC = ROOT / "src" / "intrinsym"
 MAX_README_LINES = 150
 
@@ -81,7 +83,7 @@ def anchors(path: Path) -> set[str]:
     return {github_anchor(m.group(1)) for m in re.finditer(r"^#{1,6}\s+(.*?)\s*#*\s*$", text, flags=re.MULTILINE)}
 
 
-@pytest.mark.parametrize("path", [README, *DOCS], ids=lambda p: p.name)
+@pytest.mark.parametrize("path", [README, *DOCS, *NOTES], ids=lambda p: p.name)
 def test_relative_links_resolve(path: Path) -> None:
     text = re.sub(r"^```.*?^```", "", path.read_text(encoding="utf-8"), flags=re.MULTILINE | re.DOTALL)
     broken = []
