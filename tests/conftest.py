@@ -195,8 +195,9 @@ def cli_run(capsys: pytest.CaptureFixture[str], *args: object) -> subprocess.Com
 
     For the tests of what a command prints and returns (a process costs 1-2 s of imports).
     The commands as processes: ``python -m intrinsym.app.cli detect`` (``example_detected``,
-    read by test_cli and test_reliability), ``python -m intrinsym`` (test_cli_help), and
-    those a test needs a process for (signals, resource limits, environments, memory).
+    read by test_cli and test_reliability), ``python -m intrinsym`` (test_shared_machines'
+    address-space limit, test_batch's cluster), and those a test needs a process for
+    (signals, resource limits, environments, memory).
     What the test printed before is read from ``capsys`` and dropped.
     """
     from intrinsym.app import cli

@@ -3,8 +3,6 @@
 that fit 80 columns with counts as integers."""
 
 import io
-import subprocess
-import sys
 
 import pytest
 from rich.console import Console
@@ -12,10 +10,6 @@ from rich.console import Console
 from conftest import cli_run
 from intrinsym.app import cli, text_tables
 from intrinsym.progress import STAGES, StageDone, next_stage
-
-
-def run(*args):
-    return subprocess.run([sys.executable, "-m", "intrinsym", *args], capture_output=True, text=True, timeout=120)
 
 
 def test_help_shows_the_common_options_and_help_all_every_one(capsys):
@@ -40,8 +34,11 @@ def test_batch_help_says_what_its_out_holds(capsys):
     assert "one result folder per item" in capsys.readouterr().out
 
 
-def test_a_missing_required_option_is_one_line():
-    p = run("detect", "--example")
+def test_a_missing_required_option_is_one_line(capsys):
+    # in this process (its own cost 1.5 s of imports): the one-line errors of
+    # ``python -m intrinsym`` as a shell sees them are test_shared_machines.py's (exit 2, one
+    # line on standard error, nothing else from the imports)
+    p = cli_run(capsys, "detect", "--example")
     assert p.returncode == 2 and p.stderr.count("\n") == 1, p.stderr
     assert "required: -o/--out" in p.stderr and "intrinsym detect --help" in p.stderr
 
