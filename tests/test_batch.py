@@ -19,11 +19,10 @@ import threading
 import time
 import urllib.request
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlparse
 
-import distributed
 import numpy as np
-import pandas as pd
 import psutil
 import pytest
 
@@ -35,6 +34,11 @@ from intrinsym.app.batching import rows as batch_rows
 from intrinsym.app.cli import main
 from intrinsym.mesh import generated as shapes
 from intrinsym.result.modes import two_modes
+
+# Distributed and pandas are imported by the tests that use them: every pytest-xdist worker
+# collects this module, and their imports took each worker 0.9 s before any test ran
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Tiny sizes: every item takes seconds.
 TINY = {"n_source": 20, "n_target": 200, "spin_cloud": 2000, "iterations": 5}
@@ -62,6 +66,7 @@ def meshes(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def cluster():
     """A LocalCluster of two single-threaded worker processes on loopback."""
     import dask
+    import distributed
 
     with dask.config.set({"distributed.scheduler.allowed-failures": engine.ALLOWED_FAILURES}):
         with distributed.LocalCluster(
@@ -98,6 +103,8 @@ def test_a_manifest_cell_that_is_no_value_names_the_file_and_column(tmp_path: Pa
 
 @CLUSTER
 def test_results_are_those_of_detect_and_a_corrupt_file_is_a_failed_row(by_path, meshes: Path, tmp_path: Path) -> None:
+    import pandas as pd
+
     out, frame = by_path
     assert sorted(frame["name"]) == ["broken", "cubo", "spot", "star"]
     rows = frame.set_index("name")
@@ -190,6 +197,8 @@ def read_scores(folder: Path) -> dict:
 
 @CLUSTER
 def test_a_killed_worker_s_item_runs_again_and_is_reported_once(meshes: Path, cluster, tmp_path: Path) -> None:
+    import distributed
+
     killed: list[str] = []
 
     def kill_one_busy_worker() -> None:
@@ -226,6 +235,8 @@ def _wait_for(condition, seconds: float = 180) -> None:
 def test_an_interrupted_batch_resumes_on_a_separately_started_scheduler(meshes: Path, tmp_path: Path) -> None:
     """``dask scheduler`` + ``dask worker`` on loopback, ``--scheduler``; SIGINT after the
     first item; the re-run leaves the finished folders untouched and runs the rest."""
+    import pandas as pd
+
     env = {**os.environ, **ONE_THREAD}
     bin_dir = Path(sys.executable).parent
     file = tmp_path / "scheduler.json"
