@@ -6,6 +6,8 @@ sqrt(area); accuracy is measured from a few edge lengths (0.05) up to 0.3.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -131,13 +133,11 @@ def reference_surface_graph(v: np.ndarray, f: np.ndarray, rings: int, tol: float
     for u, w in base:
         cand[u].add(w)
         cand[w].add(u)
-    norms: dict[tuple[int, int], float] = {}
 
+    @functools.cache
     def dist(a: int, b: int) -> float:
         """``np.linalg.norm(v[a] - v[b])``, each pair's computed once (the pairs recur)."""
-        if (a, b) not in norms:
-            norms[a, b] = np.linalg.norm(v[a] - v[b])
-        return norms[a, b]
+        return float(np.linalg.norm(v[a] - v[b]))
 
     rows, cols = [], []
     for u in range(n):

@@ -327,23 +327,14 @@ def test_spot_matched_to_its_half_leaves_the_cut_half_unmatched():
     assert np.mean(found[z > 0.05] >= 0) >= 0.9
 
 
-@pytest.fixture(scope="module")
-def turned_pair(turned_figure_match) -> tuple[intrinsym.Shape, np.ndarray, intrinsym.Result]:
-    """The figure matched to itself turned by 90 degrees at 50 / 500, given the turned
-    copy's own mirror map: the figure, the mirror and the result, shared by the two tests
-    below (and test_viewer.py's page of the match: conftest's ``turned_figure_match``)."""
-    a, _, mirror, result = turned_figure_match
-    return a, mirror, result
-
-
 def _near(a: intrinsym.Shape, vmap: np.ndarray, answer: np.ndarray) -> np.ndarray:
     """(N,) bool: ``vmap``'s images within 0.1 sqrt(area) (straight line) of ``answer``'s."""
     return np.linalg.norm(a.vertices[vmap] - a.vertices[answer], axis=1) / np.sqrt(surface_area(a)) <= 0.1
 
 
-def test_a_symmetric_pair_reports_both_answers(turned_pair, tmp_path):
+def test_a_symmetric_pair_reports_both_answers(turned_figure_match, tmp_path):
     """Without the target's symmetry, the second answer comes from the model."""
-    a, mirror, given = turned_pair
+    a, _, mirror, given = turned_figure_match
     result = dataclasses.replace(given, target_symmetry=None)
     # one whole shape and another: the defaults' unary and all of n_target
     assert result.params.unary == intrinsym.make_params().unary
@@ -364,14 +355,14 @@ def test_a_symmetric_pair_reports_both_answers(turned_pair, tmp_path):
     assert json.loads((out / "modes.json").read_text()) == two.as_dict()
 
 
-def test_the_targets_symmetry_gives_the_second_answer(turned_pair, tmp_path):
+def test_the_targets_symmetry_gives_the_second_answer(turned_figure_match, tmp_path):
     """Given B's own symmetry map, mode 1 is it applied after mode 0: on the turned
     figure both modes are right (one each answer) wherever mode 0 is, the two
     confidences near one half (a symmetric pair), the marginals given each mode, mixed,
     put 0.1 of a sample's mass within 0.1 of each answer wherever the two lie apart
     (measured at seeds 0 / 1 / 2: 1.000 / 0.968 / 0.938; the two BP passes' mean: 0.935 /
     0.903 / 0.906), and a loaded result says the same."""
-    a, mirror, result = turned_pair
+    a, _, mirror, result = turned_figure_match
     two = modes.two_modes(result)
     src, tgt, unit = result.source_point_vertex, result.target_point_vertex, np.sqrt(surface_area(a))
     mixed = result.mixed_marginals()
