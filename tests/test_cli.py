@@ -1,6 +1,7 @@
 """The command line: outputs, exit codes and one-line errors."""
 
 import json
+import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -127,6 +128,25 @@ def test_evaluate_command(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert "symmetry_confidence.npy: 5 confidences, the mesh has" in err
+    assert json.loads((out / "scores.json").read_text()) == scores
+
+
+def test_evaluate_against_another_runs_folder(tmp_path, capsys, example_detected):
+    """``--symmetry-map`` takes a detect output folder (its symmetry_map.npy): a run scored
+    against itself agrees on every vertex its map gives an image; a folder without a map is
+    one line naming it, exit 2, and the earlier scores survive."""
+    detected, _ = example_detected
+    out = tmp_path / "a"
+    shutil.copytree(detected, out)
+    p = cli_run(capsys, "evaluate", out, "--symmetry-map", detected, "--json")
+    assert p.returncode == 0, p.stderr
+    scores = json.loads(p.stdout)
+    assert scores["map"]["within_0.05"] == 1.0
+    assert scores["map"]["n_vertices"] == int((np.load(detected / "symmetry_map.npy") >= 0).sum()) > 0
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    p = cli_run(capsys, "evaluate", out, "--symmetry-map", empty)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and f"{empty}: a folder without symmetry_map.npy" in p.stderr
     assert json.loads((out / "scores.json").read_text()) == scores
 
 

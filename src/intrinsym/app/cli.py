@@ -133,8 +133,9 @@ def build_parser(full: bool = False) -> argparse.ArgumentParser:
         required=True,
         action="append",
         help="ground truth: TOSCA .sym, KIDS sym.txt, 0-based .npy (-1: no partner, -2: not scored; shape (K, V): "
-        "K true maps, a symmetry group) or a SHREC'16 .baryc_gt_sym (with its .baryc_gt beside it); repeat for "
-        "several true maps: each found symmetry is scored against its nearest one. With -1 entries, or "
+        "K true maps, a symmetry group), a SHREC'16 .baryc_gt_sym (with its .baryc_gt beside it) or another detect "
+        "output folder (its symmetry_map.npy: how far two runs agree); repeat for several true maps: each found "
+        "symmetry is scored against its nearest one. With -1 entries, or "
         "--reference, scores.json also holds the partial-symmetry scores (docs/format.md)",
     )
     e.add_argument(
@@ -410,10 +411,20 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _map_file(path: str) -> Path:
+    """A symmetry map's file: ``path``, or the ``symmetry_map.npy`` of a detect output folder."""
+    if not Path(path).is_dir():
+        return Path(path)
+    file = Path(path) / "symmetry_map.npy"
+    if not file.is_file():
+        raise InputError(f"{path}: a folder without symmetry_map.npy (give a detect output folder or a map file)")
+    return file
+
+
 def _target_symmetry(path: str, n_vertices: int) -> np.ndarray:
     """``--target-symmetry``: the map in a detect output folder or a map file, (N,) int64
     with -1 where a vertex has no image."""
-    file = Path(path) / "symmetry_map.npy" if Path(path).is_dir() else Path(path)
+    file = _map_file(path)
     vmap = evaluate.load_symmetry_map(file, n_vertices, allow_missing=True)
     if vmap.min() < -1:
         raise InputError(f"{file}: a symmetry map marks no vertex 'not scored' (-2)")
@@ -478,7 +489,7 @@ def _run(args: argparse.Namespace) -> int:
         raise InputError(f"{out}: no symmetry_map.npy to segment (rerun intrinsym detect)")
     n = len(shape.vertices)
     found = evaluate.load_symmetry_map(out / "symmetry_map.npy", n, allow_missing=True) if has_map else None
-    truths = symmetry_group.load_truths(args.symmetry_map, shape, args.reference)
+    truths = symmetry_group.load_truths([_map_file(path) for path in args.symmetry_map], shape, args.reference)
     nearest, group = symmetry_group.group_report(truths, found, viz.load_symmetries(out), shape)
     truth = truths[nearest]
     sym = truth.partner
