@@ -100,10 +100,7 @@ def best_parts(result: intrinsym.Result, n: int) -> np.ndarray | None:
     """(n,) bool: the input vertices of the best-ranked symmetry's two parts; None without one."""
     if result.extraction is None or result.support is None or not result.extraction.symmetries:
         return None
-    best = records.records(
-        result.extraction.symmetries[:1], result.source_point_vertex, result.target_point_vertex, result.support
-    )[0]
-    return records.part_mask(best, n)
+    return records.part_mask(result.symmetry_records()[0], n)
 
 
 def run(path: Path, method: str, overrides: Mapping) -> dict:

@@ -94,8 +94,25 @@ def test_result_contract(spot, spot_result, tmp_path):
     assert maps.shape == (len(listed), len(spot.vertices)) and maps.dtype == np.int32
     assert np.array_equal(maps[r.extraction.dominant_index], np.load(out / "symmetry_map.npy"))
     assert [e["coverage"] for e in listed] == pytest.approx(list((maps >= 0).mean(axis=1)), abs=1e-6)
+    assert listed == r.symmetry_records()
     assert np.array_equal(again.support.target_mesh_vertices, r.support.target_mesh_vertices)
     assert json.loads((out / "run.json").read_text())["format_version"] == FORMAT_VERSION
+
+
+def test_a_global_symmetrys_parts_are_where_its_map_gives_an_image(spot, spot_result):
+    """With -1 on one end of spot (x > 0.3 of its extent: as if its partner were cut
+    away), the global entry's two parts keep exactly the global parts' other vertices."""
+    k = spot_result.extraction.global_index
+    whole = spot_result.symmetry_records()[k]
+    assert whole["kind"] == "global"
+    x = spot.vertices[:, 0]
+    gone = x > x.min() + 0.7 * np.ptp(x)
+    cut = dataclasses.replace(spot_result, global_map=np.where(gone, -1, spot_result.symmetry_map()))
+    entry = cut.symmetry_records()[k]
+    for key in ("source_vertex_index", "target_vertex_index"):
+        kept = np.asarray(whole[key])
+        assert entry[key] == kept[~gone[kept]].tolist() and 0 < len(entry[key]) < len(kept)
+    assert entry["coverage"] == pytest.approx(np.mean(~gone & (spot_result.symmetry_map() >= 0)), abs=1e-6)
 
 
 def test_a_format_2_folder_loads_without_its_involution(spot_result, tmp_path):

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from intrinsym.extract.records import part_vertices, records
+from intrinsym.extract.records import cut_to_map, part_vertices, records
 from intrinsym.extract.support import SourceGraph, Support
 from intrinsym.extract.symmetry import Symmetry
 from intrinsym.geodesics.geodesics import SparseDistances
@@ -86,6 +86,18 @@ def test_records_list_input_vertices():
     assert record["target_vertex_index"] == [2, 3]
     assert record["pairs"] == [[0, 3], [1, 2]]
     assert record["kind"] == "partial" and record["score"] == 0.25 and record["consistency"] == 1.0
+    json.dumps(record)
+
+
+@pytest.mark.parametrize("one_mesh", [True, False])
+def test_a_global_entry_cut_to_where_its_map_acts(one_mesh):
+    """Vertices 1 and 4 have no image: they leave the source part, and on one mesh the
+    image part too (there they are nobody's partner); the pairs stay."""
+    record = {"source_vertex_index": [0, 1, 2, 4], "target_vertex_index": [1, 3, 4, 5], "pairs": [[0, 5]]}
+    cut_to_map(record, np.array([5, -1, 3, 2, -1, 0]), one_mesh)
+    assert record["source_vertex_index"] == [0, 2]
+    assert record["target_vertex_index"] == ([3, 5] if one_mesh else [1, 3, 4, 5])
+    assert record["pairs"] == [[0, 5]]
     json.dumps(record)
 
 

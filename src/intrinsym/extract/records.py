@@ -66,6 +66,31 @@ def records(
     return out
 
 
+def cut_to_map(record: dict[str, Any], vertex_map: np.ndarray, one_mesh: bool) -> None:
+    """Cut a global symmetry's entry to where its vertex map acts, in place.
+
+    A global symmetry's parts are every sample, but its map (``symmetry_map.npy``) leaves
+    -1 where a vertex has no partner (the side cut away, a hole's mirror). The source part
+    keeps the vertices the map gives an image; on one mesh (``detect``, where a global
+    symmetry is its own inverse) the image part keeps them too, so that the parts are the
+    region that has its symmetry.
+
+    Parameters
+    ----------
+    record : dict
+        A ``symmetries.json`` entry (:func:`records`).
+    vertex_map : (N,) int
+        Its vertex map, -1 where it gives no image.
+    one_mesh : bool
+        Source and image parts index the same mesh.
+    """
+    mapped = np.asarray(vertex_map) >= 0
+    keys = list(VERTEX_LISTS)[: 2 if one_mesh else 1]
+    for key in keys:
+        part = np.asarray(record[key], dtype=np.int64)
+        record[key] = part[mapped[part]].tolist()
+
+
 def part_vertices(record: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """(source part, image part) input-vertex indices of a ``symmetries.json`` entry,
     int64; reads the version 1 key names too."""

@@ -261,6 +261,24 @@ class Result:
         ]
         return np.stack(rows) if rows else np.empty((0, len(self.support.vertex_source)), dtype=np.int64)
 
+    def symmetry_records(self, maps: np.ndarray | None = None) -> list[dict[str, Any]]:
+        """The entries of ``symmetries.json`` (:func:`intrinsym.extract.records.records`),
+        each with its ``coverage``, the share of the input vertices its row of ``maps``
+        (default :meth:`symmetry_maps`) gives an image; a global symmetry's parts cut to
+        the vertices its map gives an image (:func:`intrinsym.extract.records.cut_to_map`).
+        Needs ``support`` and ``extraction``."""
+        if self.support is None or self.extraction is None:
+            raise ValueError("the result has no extraction")
+        maps = self.symmetry_maps() if maps is None else maps
+        listed = records.records(
+            self.extraction.symmetries, self.source_point_vertex, self.target_point_vertex, self.support
+        )
+        for entry, row in zip(listed, maps, strict=True):
+            entry["coverage"] = round(float(np.mean(row >= 0)), 6)
+            if entry["kind"] == "global":
+                records.cut_to_map(entry, row, one_mesh=self.info.mode == "detect")
+        return listed
+
     def fitted_map(self, sym: Symmetry | None) -> np.ndarray:
         """(N_in,) int64: the vertex map of a symmetry of this result's samples
         (:func:`intrinsym.globalmap.vertex_maps.fitted_vertex_map` with the extraction's parameters),
@@ -437,14 +455,10 @@ class Result:
             "run.json": write_json(run, indent=2),
         }
         if self.support is not None and self.extraction is not None:
-            listed = records.records(
-                self.extraction.symmetries, self.source_point_vertex, self.target_point_vertex, self.support
-            )
             maps = self.symmetry_maps()
+            listed = self.symmetry_records(maps)
             dominant = self.extraction.dominant_index
             vmap = maps[dominant].astype(np.int64) if dominant >= 0 else self.symmetry_map()
-            for entry, row in zip(listed, maps):
-                entry["coverage"] = round(float(np.mean(row >= 0)), 6)
             writers["symmetries.json"] = write_json(listed)
             writers["symmetry_map.npy"] = lambda path: np.save(path, vmap)
             writers["symmetry_maps.npy"] = lambda path: np.save(path, maps.astype(np.int32))
