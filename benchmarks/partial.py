@@ -76,6 +76,16 @@ def shapes(data: Path) -> list[Path]:
     return sorted((data / "shrec16_partial").glob("*/*_shape_*.off"), key=key)
 
 
+def partial_data(data: Path | None, script: str) -> Path | None:
+    """The research data folder (``--data``, else ``$INTRINSYM_DATA``) when it holds
+    ``shrec16_partial/``; else None, after printing ``script``'s skip line."""
+    found = data_folder(data)
+    if found is None or not (found / "shrec16_partial").is_dir():
+        print(no_data(script, data))
+        return None
+    return found
+
+
 def select(found: list[Path], names: list[str] | None) -> list[Path]:
     """The shapes named (exactly, or by a prefix of their name)."""
     if not names:
@@ -303,9 +313,8 @@ def run_script(
         overrides = _overrides(args.param)
     except intrinsym.ParameterError as err:
         parser.error(f"--param {err}")
-    data = data_folder(args.data)
-    if data is None or not (data / "shrec16_partial").is_dir():
-        print(no_data(script, args.data))
+    data = partial_data(args.data, script)
+    if data is None:
         return 0
     cache = args.cache / cache_folder if args.cache is not None and cache_folder else args.cache
     todo = select(shapes(data), args.shapes)

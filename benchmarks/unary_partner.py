@@ -28,15 +28,19 @@ answer. Command::
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/unary_partner.py --data DATA
         [--shapes cat0 holes_cat_shape_1 cuts ...] [--terms wks spin wks*spin] [--param NAME=VALUE ...]
+        [--json ROWS.json]
 
 ``--shapes`` takes shape or class names of ``tosca.py`` and shape names or prefixes of
-``partial.py`` (default: all of both). Prints one Markdown table.
+``partial.py`` (default: all of both). Prints one Markdown table; ``--json`` also writes
+its rows, a list of objects keyed by the column names, which ``partial_targets.py`` reads
+to explain each shape that misses a target.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -188,6 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shapes", nargs="+", metavar="NAME", help="shape or class names (default: all)")
     parser.add_argument("--terms", nargs="+", default=["wks", "spin", "wks*spin"], help="unary values measured")
     parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="a Params field changed")
+    parser.add_argument("--json", type=Path, metavar="FILE", help="also write the rows here, as JSON")
     args = parser.parse_args(argv)
     data = data_folder(args.data)
     if data is None:
@@ -203,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(measure(truth, term, params))
             print(markdown(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     print(markdown(rows))
+    if args.json is not None:
+        args.json.write_text(json.dumps(rows, indent=1))
     return 0
 
 

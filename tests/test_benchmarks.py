@@ -15,6 +15,8 @@ from intrinsym.result.modes import Modes
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import compare  # noqa: E402
+import partial  # noqa: E402
+import partial_targets  # noqa: E402
 import scores  # noqa: E402
 import shrec16_match  # noqa: E402
 import tosca  # noqa: E402
@@ -238,7 +240,131 @@ def test_unary_partner_tells_the_true_mirror_from_a_random_map(tmp_path, capsys)
     lines = unary_partner.markdown([true]).splitlines()
     assert lines[0].startswith("| shape | term | samples | argmax ≤0.05 |")
     assert lines[2].startswith(f"| m | wks*spin | {true['samples']} | ")
+    # the rows --json writes are what partial_targets.py reads beside a shape that misses
+    (tmp_path / "u.json").write_text(json.dumps([true, rand]))
+    assert partial_targets.load_unary([tmp_path / "u.json"]) == {"m": true, "r": rand}
     assert unary_partner.main(["--data", str(tmp_path / "absent")]) == 0
+    assert "skipped" in capsys.readouterr().out
+
+
+def _partial_rows(tmp_path: Path) -> tuple[Path, Path]:
+    """A data folder of four SHREC'16 names (empty files) and partial.py's cache for them,
+    scores set by hand: cuts_cat meets every target; cuts_dog is below balanced 0.60 and
+    maps its unpartnered side; holes_cat meets the balanced 0.60 but not the holes' 0.90
+    within 0.10; holes_dog has no unpartnered vertex and an IoU of 0.5."""
+    data, cache = tmp_path / "data", tmp_path / "cache"
+    scores = {  # balanced, within 0.05, within 0.10, unpartnered unmapped, IoU, seconds
+        "cuts_cat_shape_1": (0.90, 0.90, 0.95, 0.90, 0.85, 4.0),
+        "cuts_dog_shape_1": (0.30, 0.40, 0.50, 0.20, 0.90, 8.0),
+        "holes_cat_shape_1": (0.80, 0.70, 0.85, 0.90, 0.95, 6.0),
+        "holes_dog_shape_1": (0.70, 0.70, 0.95, None, 0.50, 2.0),
+    }
+    for name, (bal, w05, w10, unmapped, iou, seconds) in scores.items():
+        (data / "shrec16_partial" / name.split("_")[0]).mkdir(parents=True, exist_ok=True)
+        (data / "shrec16_partial" / name.split("_")[0] / f"{name}.off").write_text("")
+        path = data / "shrec16_partial" / name.split("_")[0] / f"{name}.off"
+        own = {"balanced": bal, "partnered_within_005": w05, "partnered_within_010": w10}
+        own |= {"unpartnered_unmapped": unmapped, "iou": iou, "seconds": seconds}
+        own["self_map"] = {  # detect's record: None where it kept a global map
+            "holes_cat_shape_1": {"source": "hypothesis 1", "trivial_global": None},
+            "holes_dog_shape_1": {"source": "none", "trivial_global": 0.9},
+        }.get(name)
+        others = {"none": {"balanced": 0.5 if unmapped is not None else 0.0}, "pyfm": {"balanced": 0.25}}
+        for method, row in {"intrinsym": own, **others}.items():
+            partial._work(
+                path, method, cache, partial._key(method, "t", {}), {}, lambda *_, r=row, n=name: {"shape": n, **r}
+            )
+    return data, cache
+
+
+def test_partial_targets_by_hand(tmp_path, capsys):
+    """Each target of the partial-symmetry issue on four hand-scored shapes: the means, the
+    shapes below a per-shape bound, the kinds and classes that miss, the baselines' margin,
+    and the shapes listed with the measures of the unary beside them."""
+    data, cache = _partial_rows(tmp_path)
+    unary = tmp_path / "unary.json"
+    measures = ("partner at floor", "argmax ≤0.05", "BP argmax ≤0.05")
+    unary_rows = [("cuts_dog_shape_1", "wks*spin", 0.8, 0.1, 0.05), ("cuts_cat_shape_1", "wks*spin", 0.1, 0.7, 0.9)]
+    unary_rows.append(("cuts_cat_shape_1", "spin", 0.0, 0.0, 0.0))  # another term: not the default unary's
+    unary.write_text(json.dumps([{"shape": n, "term": t, **dict(zip(measures, v))} for n, t, *v in unary_rows]))
+    out = tmp_path / "targets.md"
+    args = ["--data", str(data), "--cache", str(cache), "--tag", "t", "--unary", str(unary), "-o", str(out)]
+    assert partial_targets.main(args) == 0
+    text = capsys.readouterr().out
+    assert out.read_text() == text
+    cells = [[c.strip() for c in line.strip("| ").split(" | ")] for line in text.splitlines() if line.startswith("| ")]
+    rows = {c[0]: c for c in cells}
+    # the mean balanced: (0.9 + 0.3 + 0.8 + 0.7) / 4 = 0.675, short of 0.85 by 0.175; cuts
+    # (0.600), holes (0.750), cat (0.850 meets it), dog (0.500)
+    assert rows["balanced, mean (≥ 0.85)"][1:4] == [
+        "0.675 over 4 shapes",
+        "0.175",
+        "cuts 0.600, holes 0.750, dog 0.500",
+    ]
+    assert rows["balanced, every shape (≥ 0.6)"][1:5] == [
+        "1 of 4 short, lowest 0.300",
+        "up to 0.300",
+        "cuts 0.300, dog 0.300",
+        "1: dog 1",
+    ]
+    # unpartnered unmapped: holes_dog has none, so the mean of three: (0.9 + 0.2 + 0.9) / 3
+    assert rows["unpartnered left unmapped, mean (≥ 0.85)"][1:3] == ["0.667 over 3 shapes", "0.183"]
+    # the holes' within 0.10: only holes_cat (0.85) is short, by 0.05; its class is cat
+    assert rows["holes: partnered within 0.10, every shape (≥ 0.9)"][1:5] == [
+        "1 of 2 short, lowest 0.850",
+        "up to 0.050",
+        "cat 0.850",
+        "1: cat 1",
+    ]
+    # IoU 0.80 on 3 of 4 (75 %): 90 % asks for ceil(3.6) = 4, one shape short
+    assert rows["IoU best 0.80 on 90 % of the shapes (≥ 0.8)"][1:4] == ["3 of 4 (75%)", "1 shape", "holes 50%, dog 50%"]
+    assert rows["seconds per shape (≤ 5)"][1:3] == ["median 5.0, 2.0-8.0", "up to 1.6x"]
+    # ahead of the better baseline (none: 0.5, or 0.0 on holes_dog) in the four groups,
+    # by the least in cuts: 0.6 against none's 0.5
+    baseline = rows["ahead of none and pyFM on the mean balanced score, every kind and class"]
+    assert baseline[1:3] == ["ahead on 4 of 4; least margin 0.100 (cuts)", "met"]
+    listed = [r for r in rows if r.endswith("_shape_1")]
+    assert listed == ["cuts_dog_shape_1", "holes_cat_shape_1", "holes_dog_shape_1"]
+    assert rows["cuts_dog_shape_1"][1:] == [
+        "balanced",
+        "0.300",
+        "0.400",
+        "0.500",
+        "0.200",
+        "0.900",
+        "global",
+        "0.80",
+        "0.10",
+        "0.05",
+    ]
+    assert rows["holes_cat_shape_1"][1] == "holes ≤0.10" and rows["holes_cat_shape_1"][-4:] == [
+        "partial: hypothesis 1",
+        "–",
+        "–",
+        "–",
+    ]
+    assert rows["holes_dog_shape_1"][1] == "IoU" and rows["holes_dog_shape_1"][5] == "–"
+    assert rows["holes_dog_shape_1"][7] == "nothing, global was trivial"
+    assert (
+        "- partner at floor: median 0.80 over the 1 shape below balanced 0.60, 0.10 over the 1 shape at or above"
+        in text
+    )
+    # a shape without its cached row, a tag not cached and an unreadable unary file: one line, exit 2
+    assert partial_targets.main([*args[:5], "other"]) == 2
+    assert (
+        capsys.readouterr()
+        .err.strip()
+        .endswith("cuts_cat_shape_1.intrinsym.json: no row of tag 'other' (run partial.py)")
+    )
+    (cache / "holes_dog_shape_1.pyfm.json").unlink()
+    assert partial_targets.main(args) == 2
+    assert capsys.readouterr().err.strip().endswith("holes_dog_shape_1.pyfm.json: no row of tag 't' (run partial.py)")
+    unary.write_text("{")
+    _partial_rows(tmp_path)
+    assert partial_targets.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"partial_targets.py: {unary}: not unary_partner.py's --json rows") and "\n" not in err
+    assert partial_targets.main(["--data", str(tmp_path / "absent"), "--cache", str(cache)]) == 0
     assert "skipped" in capsys.readouterr().out
 
 
