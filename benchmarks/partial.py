@@ -39,7 +39,7 @@ import os
 import sys
 import time
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
@@ -239,6 +239,15 @@ def _group(stem: str) -> tuple[str, str]:
     return kind, cls
 
 
+def kinds_and_classes(names: Sequence[str]) -> dict[str, list[str]]:
+    """The shapes named per kind (cuts, holes), then per class, in the order found."""
+    groups: dict[str, list[str]] = {}
+    for index in (0, 1):
+        for n in names:
+            groups.setdefault(_group(n)[index], []).append(n)
+    return groups
+
+
 def _value(row: dict | None, key: str) -> float:
     value = None if row is None else row.get(key)
     return float("nan") if value is None else float(value)
@@ -264,11 +273,7 @@ def markdown(rows: dict[tuple[str, str], dict], names: list[str], methods: list[
 
     for n in names:
         lines.append("| " + " | ".join([n, *cells([n], np.nanmean)]) + " |")
-    groups: dict[str, list[str]] = {}
-    for n in names:
-        groups.setdefault(_group(n)[0], []).append(n)
-    for n in names:
-        groups.setdefault(_group(n)[1], []).append(n)
+    groups = kinds_and_classes(names)
     groups["all"] = list(names)
     for g, members in groups.items():
         if len(members) > 1:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -133,23 +134,12 @@ def _values(
     return np.array([partial._value(rows[n, method], key) for n in names])
 
 
-def _groups(names: Sequence[str]) -> dict[str, list[str]]:
-    """The shapes per kind, then per class."""
-    groups: dict[str, list[str]] = {}
-    for index in (0, 1):
-        for n in names:
-            groups.setdefault(partial._group(n)[index], []).append(n)
-    return groups
-
-
 def _shapes(count: int) -> str:
     return f"{count} shape" if count == 1 else f"{count} shapes"
 
 
 def _by_class(names: Sequence[str]) -> str:
-    counts: dict[str, int] = {}
-    for n in names:
-        counts[partial._group(n)[1]] = counts.get(partial._group(n)[1], 0) + 1
+    counts = Counter(partial._group(n)[1] for n in names)
     return ", ".join(f"{c} {k}" for c, k in sorted(counts.items()))
 
 
@@ -170,10 +160,10 @@ def summary_meets(target: Target, value: float) -> bool:
 def target_row(target: Target, rows: Mapping[tuple[str, str], dict], names: Sequence[str]) -> dict[str, str]:
     """One target's cells: measured, short by, the kinds and classes that miss it (with
     what :func:`summary` gives of them) and the shapes that miss it, counted per class."""
-    names = [
-        n for n in names if partial._group(n)[0] in target.kinds and np.isfinite(_values(rows, [n], target.key)[0])
-    ]
+    names = [n for n in names if partial._group(n)[0] in target.kinds]
     values = _values(rows, names, target.key)
+    names = [n for n, v in zip(names, values, strict=True) if np.isfinite(v)]  # a shape without the score
+    values = values[np.isfinite(values)]
     missing = [n for n, v in zip(names, values, strict=True) if not target.meets(v)]
     if not len(values):
         return dict.fromkeys(HEADER, "–") | {HEADER[0]: _label(target), HEADER[1]: "no shape scored"}
@@ -191,7 +181,9 @@ def target_row(target: Target, rows: Mapping[tuple[str, str], dict], names: Sequ
     else:
         text = f"{len(missing)} of {len(values)} short, lowest {values.min():.3f}"
         short = f"up to {target.short(float(values.min())):.3f}"
-    groups = {g: m for g, m in _groups(names).items() if g not in target.kinds or len(target.kinds) > 1}
+    groups = partial.kinds_and_classes(names)
+    if len(target.kinds) == 1:  # the one kind's group is all the shapes: the classes alone
+        del groups[target.kinds[0]]
     worse = []
     for group, members in groups.items():
         value = summary(target, _values(rows, members, target.key))
@@ -219,7 +211,7 @@ def _label(target: Target) -> str:
 def baseline_row(rows: Mapping[tuple[str, str], dict], names: Sequence[str]) -> dict[str, str]:
     """The target "ahead of both baselines on the mean balanced score, per class and kind"."""
     behind, margins = [], []
-    for group, members in _groups(names).items():
+    for group, members in partial.kinds_and_classes(names).items():
         ours = float(np.mean(_values(rows, members, "balanced")))
         best = max(float(np.mean(_values(rows, members, "balanced", m))) for m in ("none", "pyfm"))
         margins.append((ours - best, group))
